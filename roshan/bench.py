@@ -1,0 +1,134 @@
+"""Benchmarks behind ``roshan bench``: fire-model fidelity against the reference statistics, and speed."""
+
+import csv
+import json
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from roshan.config import Config, FireConfig, IgnitionConfig, MapConfig, SimConfig, WindConfig
+from roshan.kernels.fire import FireSim
+from roshan.maps import load_map
+from roshan.runtime import init_taichi
+
+REFERENCE_QUANTITIES = ("burning", "burned", "convection", "radiation")
+
+
+@dataclass(frozen=True)
+class FidelityCondition:
+    """One reference condition: a map and an ignition fraction (2 clusters, cluster pattern)."""
+
+    name: str  # the reference CSV's stem
+    map: str
+    fire_percentage: float
+
+
+FIDELITY_CONDITIONS = (
+    FidelityCondition("uniform50_p0015", "uniform", 0.015),
+    FidelityCondition("woods35x36_p0015", "35x36_Woods", 0.015),
+    FidelityCondition("woods35x36_p035", "35x36_Woods", 0.35),
+    FidelityCondition("campsite_p0015", "81x129_Campsite", 0.015),
+    FidelityCondition("field21_p005", "21x21_Field", 0.05),
+)
+
+
+def reference_dir() -> Path:
+    """Where the reference CSVs live: $ROSHAN_REFERENCE, else ../shared/reference next to the checkout."""
+    env = os.environ.get("ROSHAN_REFERENCE")
+    candidates = [Path(env)] if env else []
+    here = Path(__file__).resolve().parent.parent
+    candidates += [here.parent / "shared" / "reference", here / "shared" / "reference", Path.cwd() / "reference"]
+    for c in candidates:
+        if (c / "woods35x36_p0015.csv").exists():
+            return c
+    raise FileNotFoundError("reference CSVs not found; set ROSHAN_REFERENCE to the folder holding woods35x36_p0015.csv")
+
+
+def load_reference(name: str, folder: Path | None = None) -> dict[str, np.ndarray]:
+    """Reference statistics: ``step`` and ``<quantity>_{mean,min,max}`` arrays, one entry per checkpoint."""
+    path = (folder or reference_dir()) / f"{name}.csv"
+    with open(path) as fh:
+        rows = list(csv.DictReader(fh))
+    out = {"step": np.array([int(r["step"]) for r in rows])}
+    for q in REFERENCE_QUANTITIES:
+        for s in ("mean", "min", "max"):
+            out[f"{q}_{s}"] = np.array([float(r[f"{q}_{s}"]) for r in rows])
+    return out
+
+
+def run_condition(cond: FidelityCondition, seeds: int, steps: np.ndarray, seed: int = 0) -> dict[str, np.ndarray]:
+    """Run ``seeds`` independent envs of one condition in one batch; (checkpoints, seeds) arrays per quantity."""
+    cfg = Config(map=MapConfig(name=cond.map), ignition=IgnitionConfig(fire_percentage=cond.fire_percentage))
+    land = load_map(cfg.map.name)
+    sim = FireSim(land, cfg.fire, cfg.wind, cfg.ignition, num_envs=seeds, seed=seed)
+    sim.reset()
+    out = {q: np.zeros((len(steps), seeds)) for q in REFERENCE_QUANTITIES}
+    done = 0
+    for k, target in enumerate(steps):
+        sim.step(int(target) - done)
+        done = int(target)
+        stats = sim.stats()
+        for q in REFERENCE_QUANTITIES:
+            out[q][k] = stats[q]
+    return out
+
+
+def fidelity(seeds: int = 20, conditions=FIDELITY_CONDITIONS, from_step: int = 5000, seed: int = 0,
+             progress: bool = True) -> dict:
+    """Compare our seed means with the reference's seed band at every checkpoint.
+
+    Returns a dict per condition with the checkpoint table and two verdicts: ``in_band`` (our mean inside the
+    reference min..max at every checkpoint from ``from_step`` on, per quantity) and ``peak_ratio`` (our peak
+    mean particle count over the reference's, per particle type).
+    """
+    results = {}
+    for cond in conditions:
+        ref = load_reference(cond.name)
+        t0 = time.perf_counter()
+        ours = run_condition(cond, seeds, ref["step"], seed=seed)
+        elapsed = time.perf_counter() - t0
+        rows, in_band = [], {}
+        late = ref["step"] >= from_step
+        for q in REFERENCE_QUANTITIES:
+            mean = ours[q].mean(axis=1)
+            inside = (mean >= ref[f"{q}_min"]) & (mean <= ref[f"{q}_max"])
+            in_band[q] = bool(inside[late].all())
+        for k, step in enumerate(ref["step"]):
+            row = {"step": int(step)}
+            for q in REFERENCE_QUANTITIES:
+                row[q] = {"ours_mean": float(ours[q][k].mean()), "ours_min": float(ours[q][k].min()),
+                          "ours_max": float(ours[q][k].max()), "ref_mean": float(ref[f"{q}_mean"][k]),
+                          "ref_min": float(ref[f"{q}_min"][k]), "ref_max": float(ref[f"{q}_max"][k])}
+            rows.append(row)
+        peak = {q: float(ours[q].mean(axis=1).max() / max(ref[f"{q}_mean"].max(), 1e-9))
+                for q in ("convection", "radiation")}
+        results[cond.name] = {"map": cond.map, "fire_percentage": cond.fire_percentage, "seeds": seeds,
+                              "in_band": in_band, "peak_ratio": peak, "rows": rows, "seconds": elapsed}
+        if progress:
+            print(format_fidelity_verdict(cond.name, results[cond.name]), flush=True)
+    return results
+
+
+def format_fidelity_verdict(name: str, res: dict) -> str:
+    band = ", ".join(f"{q} {'ok' if v else 'OUT'}" for q, v in res["in_band"].items())
+    peak = ", ".join(f"{q} x{v:.2f}" for q, v in res["peak_ratio"].items())
+    return f"{name}: in band from 5000 steps: {band}; peak particles ours/ref: {peak} ({res['seconds']:.0f} s)"
+
+
+def format_fidelity_table(name: str, res: dict, every: int = 5000) -> str:
+    """Checkpoint table: ours mean [min..max] vs reference mean [min..max], per quantity."""
+    head = f"{'step':>6} " + " ".join(f"{q + ' ours / ref':>30}" for q in REFERENCE_QUANTITIES)
+    lines = [f"== {name} ({res['map']}, {res['fire_percentage'] * 100:g} %, {res['seeds']} seeds)", head]
+    for row in res["rows"]:
+        if row["step"] % every:
+            continue
+        cells = []
+        for q in REFERENCE_QUANTITIES:
+            r = row[q]
+            mark = " " if r["ref_min"] <= r["ours_mean"] <= r["ref_max"] else "!"
+            cells.append(f"{r['ours_mean']:8.1f}{mark}/{r['ref_mean']:7.1f} [{r['ref_min']:.0f}..{r['ref_max']:.0f}]")
+        lines.append(f"{row['step']:>6} " + " ".join(f"{c:>30}" for c in cells))
+    return "\n".join(lines)

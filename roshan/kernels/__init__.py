@@ -1,0 +1,1 @@
+"""All per-cell, per-particle and per-drone work, as Taichi kernels batched over environments."""

@@ -1,0 +1,545 @@
+"""FireSPIN on E independent copies of one land-cover map: cells, particles and their exchange (firespin.md).
+
+One parallel loop runs over environments; each env's sparse work (its burning, exposed and flooded cell lists
+and its particle pools) is done serially inside it. That keeps a step's cost proportional to the fire, not the
+map, makes the order of every update fixed (so a seed fixes the trajectory whatever the thread count) and costs
+one kernel launch per call however many envs or steps it advances.
+
+Cell times are integer step counts (firespin.md 4, "equivalent integer formulation").
+"""
+
+
+import math
+
+import numpy as np
+import taichi as ti
+
+from roshan.config import FireConfig, IgnitionConfig, WindConfig
+from roshan.kernels import particles as pt
+from roshan.kernels import rng
+from roshan.kernels.ignition import PATTERNS, light_initial_fires
+from roshan.maps import BURNED, BURNING, CLASSES, FLOODED, GENERIC_UNBURNED, LandCoverMap
+from roshan.runtime import ensure_taichi
+
+# Cell record (ti.Vector of i32 per cell): one cache line holds everything a step reads of a cell.
+C_STATE, C_FLAGS, C_IGN, C_BURN_TOTAL, C_BURN, C_EXPOSURE, C_FLOOD, C_VISIT, C_PERIODS = range(9)
+CELL_FIELDS = 9
+FLAG_EXPOSED = 1  # the cell is in the exposed ("ticking") list
+FLAG_BURNED_DOWN = 2  # burned out completely once (a flood returns it to BURNED)
+NEVER = 2**30  # ignition threshold of cells that cannot ignite
+
+# Per-env counters (E, N_COUNTS): list lengths and statistics.
+(N_BURNING, N_EXPOSED, N_FLOODED, N_CONV, N_RAD, N_BURNED, N_DROP_CONV, N_DROP_RAD, N_EXTINGUISHED,
+ N_IGNITED_INIT, N_IGNITION_SHORT) = range(11)
+N_COUNTS = 11
+STAT_NAMES = {
+    "burning": N_BURNING,
+    "burned": N_BURNED,
+    "convection": N_CONV,
+    "radiation": N_RAD,
+    "dropped_convection": N_DROP_CONV,
+    "dropped_radiation": N_DROP_RAD,
+    "flooded": N_FLOODED,
+    "extinguished": N_EXTINGUISHED,
+    "initial_fires": N_IGNITED_INIT,
+}
+
+
+def default_capacities(num_cells: int) -> tuple[int, int]:
+    """Particle pool sizes per env: one convection and two radiation slots per cell, at least 1024 / 2048.
+
+    The reference peaks (shared/reference) stay below 0.4 convection and 0.8 radiation particles per cell.
+    """
+    return max(1024, num_cells), max(2048, 2 * num_cells)
+
+
+@ti.data_oriented
+class FireSim:
+    """E FireSPIN environments on the same map, each with its own fire, wind and random stream.
+
+    Args:
+        land: the land-cover map every env simulates.
+        fire, wind, ignition: model sections (``roshan.config``).
+        num_envs: E.
+        seed: seed of all random streams; env ``e`` of episode ``k`` draws from hash(seed, e, k, ...).
+    """
+
+    def __init__(self, land: LandCoverMap, fire: FireConfig | None = None, wind: WindConfig | None = None,
+                 ignition: IgnitionConfig | None = None, num_envs: int = 1, seed: int = 0):
+        ensure_taichi()
+        self.land_map = land
+        self.fire_cfg = fire = fire or FireConfig()
+        self.wind_cfg = wind = wind or WindConfig()
+        self.ignition_cfg = ignition = ignition or IgnitionConfig()
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        self.num_envs = num_envs
+        self.seed = int(seed)
+        self.rows, self.cols = land.shape
+        self.num_cells = self.rows * self.cols
+        self.cell_size = float(land.cell_size)
+        auto_conv, auto_rad = default_capacities(self.num_cells)
+        self.conv_capacity = fire.conv_capacity or auto_conv
+        self.rad_capacity = fire.rad_capacity or auto_rad
+        self._bake_constants()
+
+        E, N = num_envs, self.num_cells
+        self.land = ti.field(ti.i32, N)
+        self.land.from_numpy(np.ascontiguousarray(land.classes.reshape(-1), dtype=np.int32))
+        self._alloc_class_table(land)
+        self.cells = ti.Vector.field(CELL_FIELDS, ti.i32, (E, N))
+        self.burning = ti.field(ti.i32, (E, N))  # flat cell indices; also the generator's list of lit cells
+        self.exposed = ti.field(ti.i32, (E, N))  # also the generator's BFS queue
+        self.flooded = ti.field(ti.i32, (E, N))
+        self.mark = ti.field(ti.i32, (E, N))  # generator scratch: used / visited-by-cluster
+        self.cand = ti.field(ti.i32, (E, 8))  # generator scratch: Moore neighbour candidates
+        self.counts = ti.field(ti.i32, (E, N_COUNTS))
+        self.conv = ti.Vector.field(pt.CONV_FIELDS, ti.f32, (E, self.conv_capacity))
+        self.rad = ti.Vector.field(pt.RAD_FIELDS, ti.f32, (E, self.rad_capacity))
+        self.wind = ti.Vector.field(2, ti.f32, E)
+        self.step_count = ti.field(ti.i32, E)  # fire updates since the env's last reset
+        self.episode = ti.field(ti.i32, E)  # resets so far
+        self.env_key = ti.field(ti.u32, E)  # hash(seed, env, episode): the root of the env's streams
+        self.gen_ctr = ti.field(ti.i32, E)  # draw counter of the serial initial-fire generator
+        self.normals = ti.field(ti.f32, rng.TABLE_SIZE)
+        self.unit = ti.Vector.field(2, ti.f32, rng.TABLE_SIZE)
+        q = rng.normal_quantiles()
+        self.normals.from_numpy(q)
+        angles = 2.0 * np.pi * rng.normal_quantiles(seed=0xA11CE).astype(np.float64)
+        self.unit.from_numpy(np.stack([np.cos(angles), np.sin(angles)], axis=1).astype(np.float32))
+        self.episode.fill(-1)
+        self._all = np.ones(E, dtype=np.int32)
+
+    # ------------------------------------------------------------------------------------------ setup
+
+    def _bake_constants(self) -> None:
+        """Python scalars read inside kernels are compile-time constants: derive them once here."""
+        f, w, ig = self.fire_cfg, self.wind_cfg, self.ignition_cfg
+        cv = f.convection
+        self.dt = f.dt
+        self.uniform = bool(self.land_map.is_uniform)
+        self.flood_steps = max(1, math.ceil(f.flood_duration / f.dt - 1e-6))
+        self.conv_on = bool(cv.enabled)
+        self.rad_on = bool(f.radiation.enabled)
+        u_prime = w.turbulence * w.speed
+        self.conv_decay = 1.0 - f.dt / cv.tau_mem
+        self.conv_f1dt = (2.0 + 3.0 * cv.c0) / 4.0 * (u_prime / cv.lt) * f.dt
+        self.conv_f2 = math.sqrt(cv.c0 * u_prime**3 / cv.lt * f.dt)
+        self.conv_fldt = cv.fl * f.dt
+        self.conv_y_st, self.conv_y_lim = cv.y_st, cv.y_lim
+        self.rad_y_st, self.rad_y_lim = f.radiation.y_st, f.radiation.y_lim
+        self.sqrt_dt = math.sqrt(f.dt)
+        self.extent = (self.rows * self.cell_size, self.cols * self.cell_size)
+        self.wind_speed = w.speed
+        self.wind_dir = w.direction  # degrees, -1 = random per episode
+        self.spread_prob, self.spread_noise = ig.spread_prob, ig.noise
+        self.num_fires = int(np.float32(self.num_cells) * np.float32(ig.fire_percentage))  # float product, truncated
+        self.num_clusters = ig.clusters
+        self.pattern = PATTERNS.index(ig.pattern)
+
+    def _alloc_class_table(self, land: LandCoverMap) -> None:
+        n = len(CLASSES)
+        self.cls_ignitable = ti.field(ti.i32, n)
+        self.cls_tau_ign = ti.field(ti.f32, n)
+        self.cls_tau_burn = ti.field(ti.f32, n)
+        self.cls_n_conv = ti.field(ti.i32, n)
+        self.cls_n_rad = ti.field(ti.i32, n)
+        self.cls_lr = ti.Vector.field(2, ti.f32, n)
+        self.cls_sf = ti.Vector.field(2, ti.f32, n)  # mean, std of the no-wind radiation spread rate
+        tau_ign = np.array([c.tau_ign for c in CLASSES], np.float32)
+        tau_burn = np.array([c.tau_burn for c in CLASSES], np.float32)
+        if land.is_uniform:  # the uniform map takes its times from the config (firespin.md 2.2)
+            tau_ign[GENERIC_UNBURNED] = self.fire_cfg.uniform_ignition_time
+            tau_burn[GENERIC_UNBURNED] = self.fire_cfg.uniform_burning_time
+        self.cls_ignitable.from_numpy(np.array([c.is_ignitable for c in CLASSES], np.int32))
+        self.cls_tau_ign.from_numpy(tau_ign)
+        self.cls_tau_burn.from_numpy(tau_burn)
+        self.cls_n_conv.from_numpy(np.array([c.n_conv for c in CLASSES], np.int32))
+        self.cls_n_rad.from_numpy(np.array([c.n_rad for c in CLASSES], np.int32))
+        self.cls_lr.from_numpy(np.array([(c.lr_min, c.lr_max) for c in CLASSES], np.float32))
+        self.cls_sf.from_numpy(np.array([(c.sf0_mean, c.sf0_std) for c in CLASSES], np.float32))
+
+    # ------------------------------------------------------------------------------------------ public API
+
+    def reset(self, mask=None) -> None:
+        """Start a new episode in the envs where ``mask`` (shape (E,), int32, numpy or torch) is non-zero.
+
+        Redraws every cell's durations, clears particles and lists, draws the wind and lights the initial fires.
+        """
+        mask = self._all if mask is None else mask
+        self._reset_envs(mask, rng.base_key(self.seed))
+
+    def step(self, n: int = 1) -> None:
+        """Advance every env by ``n`` fire updates (n * dt seconds) in one kernel launch."""
+        if n > 0:
+            self._advance(n)
+
+    def flood(self, requests, extinguished) -> None:
+        """Drop water on cells (firespin.md 8), in order within each env.
+
+        Args:
+            requests: (E, M) int32 flat cell indices ``i * cols + j``; negative entries are ignored.
+            extinguished: (E, M) int32 output, 1 where the cell was burning (and is now flooded), else 0.
+        """
+        self._flood(requests, extinguished)
+
+    def stats(self) -> dict[str, np.ndarray]:
+        """Per-env counters, each an (E,) int array (a host copy: not for the step loop)."""
+        c = self.counts.to_numpy()
+        return {name: c[:, col].copy() for name, col in STAT_NAMES.items()}
+
+    def state(self, env: int = 0) -> np.ndarray:
+        """Cell states of one env as a (rows, cols) int32 array (class id, or 12/13/14 burning/burned/flooded)."""
+        return self.cells.to_numpy()[env, :, C_STATE].reshape(self.rows, self.cols)
+
+    def cell_records(self) -> np.ndarray:
+        """Every cell record, (E, rows, cols, CELL_FIELDS) int32 (tests and debugging)."""
+        return self.cells.to_numpy().reshape(self.num_envs, self.rows, self.cols, CELL_FIELDS)
+
+    def particles(self, env: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Live particles of one env: convection (n, 3) and radiation (m, 3) rows of (x1 m, x2 m, intensity)."""
+        c = self.counts.to_numpy()[env]
+        conv = self.conv.to_numpy()[env, : c[N_CONV]]
+        rad = self.rad.to_numpy()[env, : c[N_RAD]]
+        rad_pos = rad[:, pt.R_O1 : pt.R_O2 + 1] + rad[:, pt.R_R, None] * rad[:, pt.R_C : pt.R_S + 1]
+        return (np.column_stack([conv[:, pt.P_X1], conv[:, pt.P_X2], conv[:, pt.P_Y]]),
+                np.column_stack([rad_pos, rad[:, pt.R_Y]]))
+
+    def wind_vectors(self) -> np.ndarray:
+        """(E, 2) wind velocity (m/s) along (rows, cols)."""
+        return self.wind.to_numpy()
+
+    def memory_bytes_per_env(self) -> int:
+        """Bytes of Taichi field memory one env holds (cells, lists, particle pools)."""
+        per_cell = 4 * (CELL_FIELDS + 4)
+        return (self.num_cells * per_cell + 4 * (pt.CONV_FIELDS * self.conv_capacity
+                                                 + pt.RAD_FIELDS * self.rad_capacity) + 4 * (N_COUNTS + 16))
+
+    # Test hooks: drive the cell state machine directly, without particles or the generator.
+    def ignite_cells(self, mask) -> None:
+        """Ignite the cells where ``mask`` (E, rows*cols int32) is non-zero and that can ignite."""
+        self._ignite_cells(mask)
+
+    def prescribe_exposure(self, mask) -> None:
+        """Mark cells (E, rows*cols int32 mask) as visited by a particle in the next update."""
+        self._prescribe_exposure(mask)
+
+    # ------------------------------------------------------------------------------------------ kernels
+
+    @ti.kernel
+    def _reset_envs(self, mask: ti.types.ndarray(dtype=ti.i32, ndim=1), seed_key: ti.u32):
+        for e in range(self.num_envs):  # new episode: new key, counters, wind
+            if mask[e] != 0:
+                self.episode[e] += 1
+                self.env_key[e] = rng.key(seed_key, e, self.episode[e])
+                for k in ti.static(range(N_COUNTS)):
+                    self.counts[e, k] = 0
+                self.step_count[e] = 0
+                self.gen_ctr[e] = 0
+                self.wind[e] = self._draw_wind(e)
+        for e, c in ti.ndrange(self.num_envs, self.num_cells):  # every cell of the reset envs, in parallel
+            if mask[e] != 0:
+                self._reset_cell(e, c)
+        for e in range(self.num_envs):  # the generator is serial per env
+            if mask[e] != 0:
+                light_initial_fires(self, e)
+                self.counts[e, N_IGNITED_INIT] = self.counts[e, N_BURNING]
+
+    @ti.func
+    def _draw_wind(self, e):
+        alpha = ti.cast(self.wind_dir, ti.f32) * (math.pi / 180.0)
+        if ti.static(self.wind_dir < 0):
+            alpha = rng.TWO_PI * rng.uniform(rng.key(self.env_key[e], rng.DOMAIN_EPISODE, 0))
+        return ti.Vector([ti.cos(alpha), ti.sin(alpha)]) * self.wind_speed
+
+    @ti.func
+    def _reset_cell(self, e, c):
+        """Per-cell randomisation of firespin.md 2.3: durations x (1 + s*u), s in {-1,0,1}, u ~ U(0.1, 0.2)."""
+        cls = self.land[c]
+        k = rng.key(self.env_key[e], rng.DOMAIN_CELLS, c)
+        s1 = ti.cast(rng.uniform_int(rng.key(k, 0, 0), 3) - 1, ti.f32)
+        u1 = 0.1 + 0.1 * rng.uniform(rng.key(k, 1, 0))
+        s2 = ti.cast(rng.uniform_int(rng.key(k, 2, 0), 3) - 1, ti.f32)
+        u2 = 0.1 + 0.1 * rng.uniform(rng.key(k, 3, 0))
+        tau_burn = self.cls_tau_burn[cls] * (1.0 + s1 * u1)
+        tau_ign = self.cls_tau_ign[cls] * (1.0 + s2 * u2)
+        ign_steps = NEVER
+        if self.cls_ignitable[cls] != 0:
+            ign_steps = ti.max(1, ti.cast(ti.ceil(tau_ign / self.dt - 1e-4), ti.i32))
+        burn_total = ti.max(1, ti.cast(ti.ceil(tau_burn / self.dt - 1e-4), ti.i32))
+        periods = _period(tau_burn, self.cls_n_conv[cls]) | (_period(tau_burn, self.cls_n_rad[cls]) << 16)
+        self.cells[e, c] = ti.Vector([cls, 0, ign_steps, burn_total, 0, 0, 0, -1, periods], ti.i32)
+        self.mark[e, c] = 0
+
+    @ti.kernel
+    def _advance(self, n_steps: ti.i32):
+        for e in range(self.num_envs):
+            for _ in range(n_steps):
+                self._step_env(e)
+
+    @ti.func
+    def _step_env(self, e):
+        """One fire update in the reference's order (firespin.md 4); steps 2 and 4 share one pass."""
+        t = self.step_count[e] + 1
+        self.step_count[e] = t
+        step_key = rng.mix32(self.env_key[e] ^ (ti.cast(t, ti.u32) * ti.u32(0x9E3779B9)))
+        self._move_convection(e, t, step_key)
+        self._move_radiation(e, t, step_key)
+        self._drain_floods(e)
+        self._expose_and_ignite(e, t)
+        self._burn(e, step_key)
+
+    @ti.func
+    def _cell_of(self, x1, x2):
+        """Flat index of the cell holding a point in metres, or -1 outside the grid."""
+        c = -1
+        if 0.0 <= x1 < self.extent[0] and 0.0 <= x2 < self.extent[1]:
+            i = ti.min(ti.cast(x1 / self.cell_size, ti.i32), self.rows - 1)
+            j = ti.min(ti.cast(x2 / self.cell_size, ti.i32), self.cols - 1)
+            c = i * self.cols + j
+        return c
+
+    @ti.func
+    def _visit(self, e, c, t):
+        """A live particle sits in cell c during update t: stamp it and add it to the exposed list once."""
+        self.cells[e, c][C_VISIT] = t
+        flags = self.cells[e, c][C_FLAGS]
+        if self.cls_ignitable[self.cells[e, c][C_STATE]] != 0 and (flags & FLAG_EXPOSED) == 0:
+            self.cells[e, c][C_FLAGS] = flags | FLAG_EXPOSED
+            n = self.counts[e, N_EXPOSED]
+            self.exposed[e, n] = c
+            self.counts[e, N_EXPOSED] = n + 1
+
+    @ti.func
+    def _move_convection(self, e, t, step_key):
+        w = 0
+        wind = self.wind[e]
+        for i in range(self.counts[e, N_CONV]):
+            h = rng.key(step_key, i, rng.DOMAIN_CONVECTION)
+            p = pt.advect_convection(self.conv[e, i], wind, self.normals[rng.low16(h)],
+                                     self.normals[rng.high16(h)], self.conv_decay, self.conv_f1dt,
+                                     self.conv_f2, self.conv_fldt)
+            c = self._cell_of(p[pt.P_X1], p[pt.P_X2])
+            if c >= 0 and p[pt.P_Y] >= self.conv_y_lim:
+                self.conv[e, w] = p
+                w += 1
+                self._visit(e, c, t)
+        self.counts[e, N_CONV] = w
+
+    @ti.func
+    def _move_radiation(self, e, t, step_key):
+        w = 0
+        for i in range(self.counts[e, N_RAD]):
+            h = rng.key(step_key, i, rng.DOMAIN_RADIATION)
+            p = self.rad[e, i]
+            sf = self.cls_sf[ti.cast(p[pt.R_CLS], ti.i32)]
+            p = pt.advect_radiation(p, self.unit[rng.low16(h)], self.normals[rng.high16(h)],
+                                    sf[0] * self.dt, sf[1] * self.sqrt_dt)
+            x = pt.radiation_position(p)
+            c = self._cell_of(x[0], x[1])
+            if c >= 0 and p[pt.R_Y] >= self.rad_y_lim:
+                self.rad[e, w] = p
+                w += 1
+                self._visit(e, c, t)
+        self.counts[e, N_RAD] = w
+
+    @ti.func
+    def _drain_floods(self, e):
+        w = 0
+        for k in range(self.counts[e, N_FLOODED]):
+            c = self.flooded[e, k]
+            f = self.cells[e, c][C_FLOOD] + 1
+            if f >= self.flood_steps:  # the flood ends: back to the original class, or burned
+                self.cells[e, c][C_FLOOD] = 0
+                state = self.land[c]
+                if (self.cells[e, c][C_FLAGS] & FLAG_BURNED_DOWN) != 0:
+                    state = BURNED
+                self.cells[e, c][C_STATE] = state
+            else:
+                self.cells[e, c][C_FLOOD] = f
+                self.flooded[e, w] = c
+                w += 1
+        self.counts[e, N_FLOODED] = w
+
+    @ti.func
+    def _expose_and_ignite(self, e, t):
+        """Prune unvisited cells from the exposed list, count exposure for the rest and ignite at threshold."""
+        w = 0
+        for k in range(self.counts[e, N_EXPOSED]):
+            c = self.exposed[e, k]
+            rec = self.cells[e, c]
+            if rec[C_VISIT] != t:
+                self.cells[e, c][C_FLAGS] = rec[C_FLAGS] & ~FLAG_EXPOSED
+            else:
+                exposure = rec[C_EXPOSURE] + 1
+                self.cells[e, c][C_EXPOSURE] = exposure
+                if exposure >= rec[C_IGN]:
+                    self.cells[e, c][C_FLAGS] = rec[C_FLAGS] & ~FLAG_EXPOSED
+                    self._ignite(e, c)
+                else:
+                    self.exposed[e, w] = c
+                    w += 1
+        self.counts[e, N_EXPOSED] = w
+
+    @ti.func
+    def _ignite(self, e, c):
+        self.cells[e, c][C_STATE] = BURNING
+        n = self.counts[e, N_BURNING]
+        self.burning[e, n] = c
+        self.counts[e, N_BURNING] = n + 1
+
+    @ti.func
+    def _burn(self, e, step_key):
+        w = 0
+        for k in range(self.counts[e, N_BURNING]):
+            c = self.burning[e, k]
+            rec = self.cells[e, c]
+            b = rec[C_BURN] + 1
+            self.cells[e, c][C_BURN] = b
+            # Emission when the burning time crosses a whole second k >= 1 that is a multiple of the period.
+            sec_new = ti.cast(ti.floor(ti.cast(b, ti.f64) * self.dt + 1e-9), ti.i32)
+            sec_old = ti.cast(ti.floor(ti.cast(b - 1, ti.f64) * self.dt + 1e-9), ti.i32)
+            if sec_new != sec_old and sec_new > 0:
+                if ti.static(self.conv_on):
+                    if sec_new % (rec[C_PERIODS] & 0xFFFF) == 0:
+                        self._emit_convection(e, c, step_key)
+                if ti.static(self.rad_on):
+                    if sec_new % (rec[C_PERIODS] >> 16) == 0:
+                        self._emit_radiation(e, c, step_key)
+            if b >= rec[C_BURN_TOTAL]:
+                self.cells[e, c][C_STATE] = BURNED
+                self.cells[e, c][C_FLAGS] = rec[C_FLAGS] | FLAG_BURNED_DOWN
+                self.counts[e, N_BURNED] += 1
+            else:
+                self.burning[e, w] = c
+                w += 1
+        self.counts[e, N_BURNING] = w
+
+    @ti.func
+    def _emit_convection(self, e, c, step_key):
+        n = self.counts[e, N_CONV]
+        if n < self.conv_capacity:
+            h = rng.key(step_key, c, rng.DOMAIN_EMISSION)
+            i = c // self.cols
+            j = c % self.cols
+            # The reference's particle constructor takes whole metres: the emission point is truncated.
+            x1 = ti.floor((i + rng.uniform(h)) * self.cell_size)
+            x2 = ti.floor((j + rng.uniform(rng.mix32(h))) * self.cell_size)
+            self.conv[e, n] = ti.Vector([x1, x2, 0.0, 0.0, self.conv_y_st], ti.f32)
+            self.counts[e, N_CONV] = n + 1
+        else:
+            self.counts[e, N_DROP_CONV] += 1
+
+    @ti.func
+    def _emit_radiation(self, e, c, step_key):
+        n = self.counts[e, N_RAD]
+        if n < self.rad_capacity:
+            cls = self.land[c]  # the mother class, never the burning state
+            h = rng.key(step_key, c, rng.DOMAIN_EMISSION + 16)
+            h2 = rng.mix32(h)
+            sf = self.cls_sf[cls]
+            lr = self.cls_lr[cls]
+            sf_sample = ti.abs(sf[0] + sf[1] * self.normals[rng.low16(h)])
+            length = lr[0] + (lr[1] - lr[0]) * rng.uniform(h2)
+            tau = 2703.0
+            if sf_sample > 0.00925:
+                tau = length / sf_sample
+            i = c // self.cols
+            j = c % self.cols
+            o1 = (i + rng.uniform(rng.mix32(h2))) * self.cell_size
+            o2 = (j + rng.uniform(rng.mix32(h2 + ti.u32(1)))) * self.cell_size
+            self.rad[e, n] = pt.new_radiation(o1, o2, self.rad_y_st, 1.0 - self.dt / tau, cls)
+            self.counts[e, N_RAD] = n + 1
+        else:
+            self.counts[e, N_DROP_RAD] += 1
+
+    # ------------------------------------------------------------------------------------------ water
+
+    @ti.kernel
+    def _flood(self, requests: ti.types.ndarray(dtype=ti.i32, ndim=2),
+               extinguished: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+        for e in range(self.num_envs):  # requests of one env are applied in order
+            for m in range(requests.shape[1]):
+                c = requests[e, m]
+                extinguished[e, m] = 0
+                if 0 <= c < self.num_cells:
+                    extinguished[e, m] = self._drop_water(e, c)
+
+    @ti.func
+    def _drop_water(self, e, c) -> ti.i32:
+        """firespin.md 8: flood a cell; returns 1 if it was burning (extinguished)."""
+        state = self.cells[e, c][C_STATE]
+        was_burning = 0
+        if state == BURNING:
+            was_burning = 1
+            _remove_from_list(self.burning, self.counts, e, N_BURNING, c)
+            self.cells[e, c][C_EXPOSURE] = 0
+            self.counts[e, N_EXTINGUISHED] += 1
+        elif (self.cells[e, c][C_FLAGS] & FLAG_EXPOSED) != 0:
+            _remove_from_list(self.exposed, self.counts, e, N_EXPOSED, c)
+            self.cells[e, c][C_FLAGS] = self.cells[e, c][C_FLAGS] & ~FLAG_EXPOSED
+        if state != FLOODED:
+            n = self.counts[e, N_FLOODED]
+            self.flooded[e, n] = c
+            self.counts[e, N_FLOODED] = n + 1
+        self.cells[e, c][C_STATE] = FLOODED
+        self.cells[e, c][C_FLOOD] = 0
+        self._delete_particles_in(e, c)
+        return was_burning
+
+    @ti.func
+    def _delete_particles_in(self, e, c):
+        w = 0
+        for i in range(self.counts[e, N_CONV]):
+            p = self.conv[e, i]
+            if self._cell_of(p[pt.P_X1], p[pt.P_X2]) != c:
+                self.conv[e, w] = p
+                w += 1
+        self.counts[e, N_CONV] = w
+        w = 0
+        for i in range(self.counts[e, N_RAD]):
+            p = self.rad[e, i]
+            x = pt.radiation_position(p)
+            if self._cell_of(x[0], x[1]) != c:
+                self.rad[e, w] = p
+                w += 1
+        self.counts[e, N_RAD] = w
+
+    # ------------------------------------------------------------------------------------------ test hooks
+
+    @ti.kernel
+    def _ignite_cells(self, mask: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+        for e in range(self.num_envs):
+            for c in range(self.num_cells):
+                if mask[e, c] != 0 and self.cls_ignitable[self.cells[e, c][C_STATE]] != 0:
+                    if (self.cells[e, c][C_FLAGS] & FLAG_EXPOSED) != 0:
+                        _remove_from_list(self.exposed, self.counts, e, N_EXPOSED, c)
+                        self.cells[e, c][C_FLAGS] = self.cells[e, c][C_FLAGS] & ~FLAG_EXPOSED
+                    self._ignite(e, c)
+
+    @ti.kernel
+    def _prescribe_exposure(self, mask: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+        for e in range(self.num_envs):
+            for c in range(self.num_cells):
+                if mask[e, c] != 0:
+                    self._visit(e, c, self.step_count[e] + 1)
+
+
+@ti.func
+def _period(tau_burn: ti.f32, n: ti.i32) -> ti.i32:
+    """Emission period in whole seconds: max(1, floor((tau_burn - 1) / n)) (firespin.md 2.3)."""
+    p = 1
+    if n > 0:
+        p = ti.max(1, ti.cast(ti.floor((tau_burn - 1.0) / n), ti.i32))
+    return p
+
+
+@ti.func
+def _remove_from_list(lst: ti.template(), counts: ti.template(), e, col, c):
+    """Remove cell c from an env's unordered cell list by moving the last entry into its slot."""
+    n = counts[e, col]
+    for k in range(n):
+        if lst[e, k] == c:
+            lst[e, k] = lst[e, n - 1]
+            counts[e, col] = n - 1
+            break

@@ -1,0 +1,382 @@
+"""Frames of one FireSim env as north-up RGB images, drawn by Taichi kernels (firespin.md 13).
+
+A frame is built in one ``u8`` image field, ``image[py, px]``, with pixel row 0 = grid row 0 (the northern
+edge) and pixel column = grid column, ``cell_px`` pixels per cell:
+
+1. ``_paint_cells``: every pixel takes its cell's colour from a (state, original class) table. Class ids
+   show their class colour, BURNING is (255, 0, 0), BURNED blends (42, 42, 42) with the original class colour
+   20:1 and FLOODED blends (77, 187, 230) with it 40:1. No texture noise.
+2. ``_splat_particles`` (``particles=True``): each live particle of the env is alpha-blended into its own
+   bounding box of pixels, in pool order (serial loop, so overlapping particles always blend the same way).
+   Radius grows linearly with intensity Y from ``r0 = cell_px / 6`` (Y = 0) to ``3 r0`` (Y = 1), never below
+   ``MIN_RADIUS_PX`` so that every particle covers at least one pixel on small frames. Colour is the "fire"
+   palette (``fire_colour``: dark red -> red for Y <= 0.3, red -> yellow above, green clamped at 255), alpha
+   ``0.6 + 0.4 rel``. **Convection** particles are filled discs; **radiation** particles are rings (a third
+   of the radius thick, at least one pixel) in the palette lightened halfway to white, drawn after the
+   convection discs so they stay visible on top of them.
+3. ``overlay`` (optional argument of :meth:`FrameRenderer.render`): a callable ``overlay(image, cell_px)``
+   that may draw into the same field, e.g. drones. ``image`` is the ``ti.Vector.field(3, ti.u8, (H, W))``
+   above (north-up, ``[py, px]``); a point at ``(x1, x2)`` metres lies at pixel
+   ``(x1 / cell_size * cell_px, x2 / cell_size * cell_px)``.
+4. ``_draw_wind_arrow``: a white arrow on a dark disc in the top-right corner points where the wind blows
+   (wind component 1 = south = down the image, component 2 = east = right). A calm wind shows a dot.
+
+Backends only differ in how the finished field leaves Taichi:
+
+- ``raster``: ``image.to_numpy()``, PNGs written with PIL. No Vulkan needed.
+- ``ggui``: the field is copied, flipped, into a ``(W, H)`` field (GGUI indexes images as ``(x, y)`` with
+  ``(0, 0)`` at the bottom-left) and set as the canvas image of an offscreen ``ti.ui.Window``; frames are
+  read back with ``get_image_buffer_as_numpy`` and PNGs written by ``window.save_image`` (RGBA). The ``u8``
+  field reaches GGUI's 8-bit target unchanged, so both backends give identical pixels.
+- ``auto``: ``ggui`` if an offscreen window opens, else ``raster`` with one warning.
+
+Taichi 1.7 crashes (at ``destroy`` or at interpreter exit) when two GGUI windows are alive at once, so the
+process holds at most one: renderers of the same size share it, and a renderer of another size replaces it
+(about 0.2 s to open).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+import taichi as ti
+from PIL import Image
+from taichi.lang import impl
+
+from roshan.kernels.fire import C_STATE, N_CONV, N_RAD
+from roshan.kernels.particles import P_X1, P_X2, P_Y, R_Y, radiation_position
+from roshan.maps import BURNED, CLASSES, FLOODED
+
+BACKENDS = ("auto", "ggui", "raster")
+TARGET_LONG_SIDE_PX = 720  # default frame size: the longer side of the map is about this many pixels
+MIN_CELL_PX, MAX_CELL_PX = 2, 24
+MIN_RADIUS_PX = 0.75  # > sqrt(2)/2: some pixel centre always lies inside the particle's disc
+BURNED_WEIGHT, FLOODED_WEIGHT = 20, 40  # state colour : original class colour (firespin.md 13)
+ARROW_BACKDROP = (21, 19, 51)  # the reference's background colour, behind the wind arrow
+ARROW_BACKDROP_ALPHA = 0.65
+WINDOW_TITLE = "ROSHAN-Taichi"
+NO_GGUI_HINT = ("GGUI/Vulkan is unavailable, so frames are rendered with the raster fallback (numpy/PIL). "
+                "For GGUI install a Vulkan driver, e.g. `apt-get install -y mesa-vulkan-drivers` (Debian).")
+
+Overlay = Callable[[object, int], None]
+
+
+def default_cell_px(rows: int, cols: int) -> int:
+    """Pixels per cell so the longer side is about ``TARGET_LONG_SIDE_PX`` (between 2 and 24 px per cell)."""
+    return int(min(MAX_CELL_PX, max(MIN_CELL_PX, round(TARGET_LONG_SIDE_PX / max(rows, cols)))))
+
+
+def cell_colours() -> np.ndarray:
+    """(K, K, 3) uint8 table, K = len(CLASSES): the colour of a cell in state ``s`` whose original class is ``k``.
+
+    Plain states show their own colour; BURNED and FLOODED blend theirs with the original class colour.
+    """
+    base = np.array([c.colour for c in CLASSES], np.float64)
+    table = np.repeat(base[:, None, :], len(CLASSES), axis=1)
+    table[BURNED] = (BURNED_WEIGHT * base[BURNED] + base) / (BURNED_WEIGHT + 1)
+    table[FLOODED] = (FLOODED_WEIGHT * base[FLOODED] + base) / (FLOODED_WEIGHT + 1)
+    return np.rint(table).astype(np.uint8)
+
+
+@ti.func
+def fire_colour(y: ti.f32):
+    """The "fire" palette of firespin.md 13 as (r, g, b, alpha), r/g/b in 0..255, alpha in 0.6..1.
+
+    Y <= 0.3: dark red (128, 0, 0) -> (255, 100, 0); Y > 0.3: red -> yellow, green from 128 up to at most 255
+    (the reference overflows its 8-bit green channel here; we clamp instead).
+    """
+    rgba = ti.Vector([0.0, 0.0, 0.0, 0.0])
+    if y <= 0.3:
+        rel = y / 0.3
+        rgba = ti.Vector([128.0 + 127.0 * rel, 100.0 * rel, 0.0, 0.6 + 0.4 * rel])
+    else:
+        rel = ti.min((y - 0.3) / 0.7, 1.0)
+        rgba = ti.Vector([255.0, ti.min(255.0, 128.0 + 127.0 * rel), 0.0, 0.6 + 0.4 * rel])
+    return rgba
+
+
+@ti.func
+def blend(old, colour, alpha: ti.f32):
+    """``alpha * colour + (1 - alpha) * old`` for a u8 pixel, rounded to nearest."""
+    mixed = ti.cast(old, ti.f32) + alpha * (colour - ti.cast(old, ti.f32))
+    return ti.cast(ti.min(ti.max(mixed + 0.5, 0.0), 255.0), ti.u8)
+
+
+@ti.data_oriented
+class FrameRenderer:
+    """Renders env ``env`` of a :class:`~roshan.kernels.fire.FireSim` into north-up RGB frames.
+
+    Args:
+        sim: the simulator (read only; any object with FireSim's ``cells, land, counts, conv, rad`` fields,
+            ``rows, cols, cell_size, num_envs`` and ``wind_vectors()``).
+        env: which env to draw; may be changed between frames (``renderer.env = 3``).
+        cell_px: pixels per cell; default :func:`default_cell_px`.
+        particles: draw convection discs and radiation rings.
+        backend: ``"auto"``, ``"ggui"`` or ``"raster"`` (see the module docstring). The GGUI window is opened
+            at the first frame, or when :attr:`backend` is read.
+        wind_arrow: draw the wind arrow in the top-right corner.
+    """
+
+    def __init__(self, sim, env: int = 0, cell_px: int | None = None, particles: bool = True,
+                 backend: str = "auto", wind_arrow: bool = True):
+        if backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+        self.sim = sim
+        self.env = env
+        self.cell_px = int(cell_px) if cell_px is not None else default_cell_px(sim.rows, sim.cols)
+        if self.cell_px < 1:
+            raise ValueError(f"cell_px must be >= 1, got {cell_px}")
+        self.particles = particles
+        self.wind_arrow = wind_arrow
+        self._backend = backend
+        self._window = None
+        self.height, self.width = sim.rows * self.cell_px, sim.cols * self.cell_px
+        self.px_per_m = self.cell_px / float(sim.cell_size)
+        self.r0 = self.cell_px / 6.0
+        self._arrow = _arrow_geometry(self.height, self.width)
+
+        colours = cell_colours()
+        self.colours = ti.Vector.field(3, ti.u8, colours.shape[:2])
+        self.colours.from_numpy(colours)
+        self.image = ti.Vector.field(3, ti.u8, (self.height, self.width))
+        # GGUI's (x, y)-indexed copy; a 1x1 stub for raster renderers so every field exists from __init__ on.
+        display_shape = (1, 1) if backend == "raster" else (self.width, self.height)
+        self._display = ti.Vector.field(3, ti.u8, display_shape)
+
+    # ------------------------------------------------------------------------------------------ public API
+
+    @property
+    def env(self) -> int:
+        return self._env
+
+    @env.setter
+    def env(self, env: int) -> None:
+        if not 0 <= env < self.sim.num_envs:
+            raise ValueError(f"env must be in 0..{self.sim.num_envs - 1}, got {env}")
+        self._env = int(env)
+
+    @property
+    def backend(self) -> str:
+        """``"ggui"`` or ``"raster"``: the backend in use (resolving ``"auto"`` opens the window)."""
+        if self._backend == "auto":
+            self._resolve_auto()
+        return self._backend
+
+    @property
+    def window(self):
+        """The offscreen ``ti.ui.Window`` this renderer draws into, or ``None`` on the raster backend."""
+        if self.backend == "ggui":
+            self._window = _acquire_window((self.width, self.height), self._window)
+        return self._window
+
+    def draw(self, overlay: Overlay | None = None) -> None:
+        """Build the frame in :attr:`image` (cells, particles, ``overlay(image, cell_px)``, wind arrow)."""
+        self._paint_cells(self.env)
+        if self.particles:
+            self._splat_particles(self.env)
+        if overlay is not None:
+            overlay(self.image, self.cell_px)
+        if self.wind_arrow and self._arrow is not None:
+            w1, w2 = (float(v) for v in self.sim.wind_vectors()[self.env])
+            speed = math.hypot(w1, w2)
+            d1, d2 = (w1 / speed, w2 / speed) if speed > 1e-6 else (0.0, 0.0)
+            self._draw_wind_arrow(*self._arrow, d1, d2)
+
+    def render(self, overlay: Overlay | None = None) -> np.ndarray:
+        """The current frame as an (H, W, 3) uint8 array, north up (row 0 = grid row 0)."""
+        if self.backend == "raster":
+            self.draw(overlay)
+            return self.image.to_numpy()
+        window = self._present(overlay)
+        buf = window.get_image_buffer_as_numpy()  # (W, H, 4) floats in 0..1, y = 0 at the bottom
+        return np.ascontiguousarray(np.rint(buf[:, ::-1, :3] * 255.0).astype(np.uint8).transpose(1, 0, 2))
+
+    def save_png(self, path, overlay: Overlay | None = None) -> Path:
+        """Render a frame and write it as a PNG (RGB from the raster backend, RGBA from GGUI); returns the path."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if self.backend == "raster":
+            Image.fromarray(self.render(overlay)).save(path)
+        else:
+            self._present(overlay).save_image(str(path))
+        return path
+
+    def close(self) -> None:
+        """Give up this renderer's claim on the shared GGUI window (destroyed once no renderer uses it)."""
+        if self._window is not None:
+            _release_window()
+            self._window = None
+
+    # ------------------------------------------------------------------------------------------ backends
+
+    def _resolve_auto(self) -> None:
+        global _warned_no_ggui
+        try:
+            self._window = _acquire_window((self.width, self.height), None)
+            self._backend = "ggui"
+        except Exception:  # any failure to open an offscreen window means no usable GGUI here
+            self._backend = "raster"
+            if not _warned_no_ggui:
+                _warned_no_ggui = True
+                warnings.warn(NO_GGUI_HINT, RuntimeWarning, stacklevel=3)
+
+    def _present(self, overlay: Overlay | None):
+        """Draw the frame and hand it to the window's canvas; the next read or save of the window consumes it."""
+        self.draw(overlay)
+        self._flip_to_display()
+        window = self.window
+        window.get_canvas().set_image(self._display)
+        return window
+
+    # ------------------------------------------------------------------------------------------ kernels
+
+    @ti.kernel
+    def _paint_cells(self, env: ti.i32):
+        cp = self.cell_px
+        for py, px in self.image:
+            c = (py // cp) * self.sim.cols + px // cp
+            self.image[py, px] = self.colours[self.sim.cells[env, c][C_STATE], self.sim.land[c]]
+
+    @ti.kernel
+    def _splat_particles(self, env: ti.i32):
+        # Serial loops: overlapping particles read-modify-write the same pixels, so a parallel loop would race
+        # and make frames depend on thread timing.
+        ti.loop_config(serialize=True)
+        for k in range(self.sim.counts[env, N_CONV]):
+            p = self.sim.conv[env, k]
+            self._splat(p[P_X1], p[P_X2], p[P_Y], False)
+        ti.loop_config(serialize=True)
+        for k in range(self.sim.counts[env, N_RAD]):
+            p = self.sim.rad[env, k]
+            x = radiation_position(p)
+            self._splat(x[0], x[1], p[R_Y], True)
+
+    @ti.func
+    def _splat(self, x1: ti.f32, x2: ti.f32, y: ti.f32, ring: ti.template()):
+        """Blend one particle (a disc, or a ring if ``ring``) into the pixels of its bounding box."""
+        cy, cx = x1 * self.px_per_m, x2 * self.px_per_m
+        y = ti.min(ti.max(y, 0.0), 1.0)
+        r = ti.max(self.r0 * (1.0 + 2.0 * y), MIN_RADIUS_PX)
+        rgba = fire_colour(y)
+        colour = ti.Vector([rgba[0], rgba[1], rgba[2]])
+        inner = 0.0
+        if ti.static(ring):
+            colour = 0.5 * (colour + 255.0)
+            inner = ti.max(r - ti.max(1.0, r / 3.0), 0.0)
+        y0, y1 = ti.max(0, ti.cast(ti.floor(cy - r), ti.i32)), ti.min(self.height, ti.cast(ti.ceil(cy + r), ti.i32))
+        x0, x1 = ti.max(0, ti.cast(ti.floor(cx - r), ti.i32)), ti.min(self.width, ti.cast(ti.ceil(cx + r), ti.i32))
+        for py, px in ti.ndrange((y0, y1), (x0, x1)):
+            d2 = (py + 0.5 - cy) ** 2 + (px + 0.5 - cx) ** 2
+            if inner * inner <= d2 <= r * r:
+                self.image[py, px] = blend(self.image[py, px], colour, rgba[3])
+
+    @ti.kernel
+    def _draw_wind_arrow(self, cy: ti.f32, cx: ti.f32, radius: ti.f32, d1: ti.f32, d2: ti.f32):
+        """Dark disc of ``radius`` px at (cy, cx) with a white arrow along (d1, d2), or a dot if (d1, d2) = 0."""
+        half = 0.75 * radius  # arrow from -half to +half along the wind
+        head = 0.45 * radius
+        head_w = 0.35 * radius
+        shaft_w = ti.max(1.0, radius / 8.0)
+        backdrop = ti.Vector(ARROW_BACKDROP, ti.f32)
+        white = ti.Vector([255, 255, 255], ti.u8)
+        calm = d1 == 0.0 and d2 == 0.0
+        for py, px in ti.ndrange((ti.cast(cy - radius, ti.i32), ti.cast(cy + radius, ti.i32) + 1),
+                                 (ti.cast(cx - radius, ti.i32), ti.cast(cx + radius, ti.i32) + 1)):
+            v1, v2 = py + 0.5 - cy, px + 0.5 - cx
+            if v1 * v1 + v2 * v2 <= radius * radius:
+                self.image[py, px] = blend(self.image[py, px], backdrop, ARROW_BACKDROP_ALPHA)
+                along = v1 * d1 + v2 * d2
+                across = ti.abs(v2 * d1 - v1 * d2)
+                in_shaft = -half <= along <= half - head and across <= shaft_w
+                in_head = half - head <= along <= half and across <= head_w * (half - along) / head
+                if calm:
+                    in_shaft = v1 * v1 + v2 * v2 <= (shaft_w + 1.0) ** 2
+                if in_shaft or in_head:
+                    self.image[py, px] = white
+
+    @ti.kernel
+    def _flip_to_display(self):
+        for py, px in self.image:
+            self._display[px, self.height - 1 - py] = self.image[py, px]
+
+
+def _arrow_geometry(height: int, width: int) -> tuple[float, float, float] | None:
+    """(centre row, centre column, radius) of the wind arrow's disc in the top-right corner; None if too small."""
+    radius = min(28.0, max(6.0, 0.05 * min(height, width)))
+    margin = max(2.0, radius / 3.0)
+    if 2.0 * (radius + margin) > min(height, width):
+        return None
+    return margin + radius, width - margin - radius, radius
+
+
+# ---------------------------------------------------------------------------------------------- GGUI window
+
+_shared: dict[str, object] = {"window": None, "key": None, "users": 0}
+_warned_no_ggui = False
+
+
+def _open_window(res: tuple[int, int]):
+    """A new offscreen GGUI window of ``res = (width, height)``; raises if GGUI/Vulkan is unavailable."""
+    return ti.ui.Window(WINDOW_TITLE, res, show_window=False)
+
+
+def _acquire_window(res: tuple[int, int], held):
+    """The process's one GGUI window, sized ``res``; ``held`` is the window the caller already counts as a user of.
+
+    Replaces the window when the size differs or when Taichi was re-initialised since it was opened.
+    """
+    key = (tuple(res), id(impl.get_runtime()))
+    if _shared["key"] != key:
+        if _shared["window"] is not None:
+            _shared["window"].destroy()
+            _shared["window"] = _shared["key"] = None
+        _shared["window"] = _open_window(res)
+        _shared["key"] = key
+    if held is None:
+        _shared["users"] += 1
+    return _shared["window"]
+
+
+def _release_window() -> None:
+    _shared["users"] = max(0, _shared["users"] - 1)
+    if _shared["users"] == 0 and _shared["window"] is not None:
+        _shared["window"].destroy()
+        _shared["window"] = _shared["key"] = None
+
+
+def ggui_available() -> bool:
+    """Whether an offscreen GGUI window can be opened in this process (opens the shared window if needed)."""
+    try:
+        if _shared["window"] is None:
+            _shared["window"] = _open_window((16, 16))
+            _shared["key"] = ((16, 16), id(impl.get_runtime()))
+        return True
+    except Exception:  # any failure to open a window means no usable GGUI here
+        return False
+
+
+# ---------------------------------------------------------------------------------------------- GIF
+
+
+def write_gif(frames: Sequence[Path | str | np.ndarray], out: Path | str, fps: int = 10) -> Path:
+    """Write frames (PNG paths or (H, W, 3) uint8 arrays) as a GIF that loops forever; returns ``out``."""
+    if not frames:
+        raise ValueError("write_gif needs at least one frame")
+    if fps < 1:
+        raise ValueError(f"fps must be >= 1, got {fps}")
+    images = []
+    for f in frames:
+        if isinstance(f, np.ndarray):
+            images.append(Image.fromarray(np.asarray(f, np.uint8)).convert("RGB"))
+        else:
+            with Image.open(f) as im:
+                images.append(im.convert("RGB"))
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    # Pillow merges identical consecutive frames into one longer frame; the GIF's total duration is kept.
+    images[0].save(out, save_all=True, append_images=images[1:], duration=max(1, round(1000 / fps)), loop=0)
+    return out

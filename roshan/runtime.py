@@ -1,0 +1,76 @@
+"""Taichi runtime selection: the one place that calls ``ti.init``."""
+
+from __future__ import annotations
+
+import warnings
+
+import taichi as ti
+
+ARCHES = ("cpu", "cuda", "vulkan", "auto")
+_current: dict[str, object] = {}
+
+
+def init_taichi(arch: str = "cpu", threads: int | None = None, debug: bool = False) -> str:
+    """Initialise Taichi once per process and return the arch actually used.
+
+    Args:
+        arch: ``cpu`` (default), ``cuda``, ``vulkan`` or ``auto`` (CUDA when present, else CPU).
+        threads: CPU worker threads; ``None`` lets Taichi use every core.
+        debug: Taichi debug mode (bounds checks; slow).
+
+    Calling it again with the same arguments is a no-op; with different ones it re-initialises Taichi, which
+    invalidates every field allocated before (so do it before building simulators).
+    """
+    if arch not in ARCHES:
+        raise ValueError(f"--arch: unknown arch {arch!r}; expected one of {', '.join(ARCHES)}")
+    if threads is not None and threads < 1:
+        raise ValueError(f"--threads: expected a positive integer, got {threads}")
+    key = {"arch": arch, "threads": threads, "debug": debug}
+    if _current.get("key") == key:
+        return str(_current["arch"])
+    kwargs: dict[str, object] = {"debug": debug, "random_seed": 0, "log_level": ti.WARN}
+    if threads is not None:
+        kwargs["cpu_max_num_threads"] = threads
+    if arch == "cpu":
+        kwargs["arch"] = ti.cpu
+    elif arch == "cuda":
+        kwargs["arch"] = ti.cuda
+    elif arch == "vulkan":
+        kwargs["arch"] = ti.vulkan
+    else:
+        kwargs["arch"] = ti.gpu if _has_gpu() else ti.cpu
+    ti.init(**kwargs)
+    used = _arch_name(ti.lang.impl.current_cfg().arch)
+    if arch in ("cuda", "vulkan") and used != arch:
+        warnings.warn(f"--arch {arch} requested but Taichi fell back to {used}", stacklevel=2)
+    _current.update(key=key, arch=used)
+    return used
+
+
+def current_arch() -> str | None:
+    """The arch Taichi was initialised with by :func:`init_taichi`, or ``None``."""
+    return _current.get("arch")  # type: ignore[return-value]
+
+
+def ensure_taichi() -> str:
+    """Initialise Taichi on the CPU unless :func:`init_taichi` already ran."""
+    return current_arch() or init_taichi()
+
+
+def torch_device() -> str:
+    """The torch device whose memory Taichi kernels share: ``cuda`` on CUDA, else ``cpu``."""
+    return "cuda" if current_arch() == "cuda" else "cpu"
+
+
+def _has_gpu() -> bool:
+    try:
+        import torch
+
+        return torch.cuda.is_available()
+    except Exception:  # torch missing or broken CUDA install: treat as no GPU
+        return False
+
+
+def _arch_name(arch) -> str:
+    name = str(arch).split(".")[-1]
+    return {"x64": "cpu", "arm64": "cpu"}.get(name, name)
