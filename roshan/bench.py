@@ -132,3 +132,103 @@ def format_fidelity_table(name: str, res: dict, every: int = 5000) -> str:
             cells.append(f"{r['ours_mean']:8.1f}{mark}/{r['ref_mean']:7.1f} [{r['ref_min']:.0f}..{r['ref_max']:.0f}]")
         lines.append(f"{row['step']:>6} " + " ".join(f"{c:>30}" for c in cells))
     return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------- speed
+
+# The original's fire model, one env, one thread, on this machine kind (shared/reference/README.md).
+ORIGINAL_STEPS_PER_S = {
+    ("35x36_Woods", 0.015): 430_000,
+    ("35x36_Woods", 0.35): 50_000,
+    ("81x129_Campsite", 0.015): 40_000,
+    ("Borkenberge", 0.015): 1_500,
+    ("Borkenberge_1M", 0.015): 500,  # the original's figure for Haard (941k cells)
+}
+
+
+def tiled_map(name: str = "Borkenberge", target_cells: int = 1_000_000):
+    """A ~``target_cells`` map made by tiling a bundled map (mirrored, so tiles join without seams)."""
+    from roshan.maps import LandCoverMap
+
+    base = load_map(name)
+    a = base.classes
+    reps = int(np.ceil(np.sqrt(target_cells / a.size)))
+    row = np.concatenate([a if k % 2 == 0 else a[:, ::-1] for k in range(reps)], axis=1)
+    grid = np.concatenate([row if k % 2 == 0 else row[::-1] for k in range(reps)], axis=0)
+    cols = int(np.ceil(target_cells / grid.shape[0]))
+    return LandCoverMap(name=f"{name}_1M", classes=np.ascontiguousarray(grid[:, :cols]), cell_size=base.cell_size,
+                        crs=base.crs, transform=None, source=None)
+
+
+def time_fire(land, fire_percentage: float, envs: int, steps: int, warmup: int, seed: int = 0) -> dict:
+    """Time ``steps`` updates of ``envs`` envs after a reset and ``warmup`` untimed updates.
+
+    Particles, wind (random direction) and the default capacities are on; the reset before the timed steps
+    is timed too (every env resets once per run). Burning-cell updates are summed from 10 chunks.
+    """
+    cfg = Config(ignition=IgnitionConfig(fire_percentage=fire_percentage), sim=SimConfig(envs=envs, seed=seed))
+    sim = FireSim(land, cfg.fire, WindConfig(), cfg.ignition, num_envs=envs, seed=seed)
+    sim.reset()
+    sim.step(max(warmup, 1))  # compiles the kernels
+    sim.stats()
+    chunks = 10
+    per_chunk = max(1, steps // chunks)
+    burning_updates = 0.0
+    t0 = time.perf_counter()
+    sim.reset()
+    for _ in range(chunks):
+        before = sim.counts.to_numpy()[:, 0].sum()
+        sim.step(per_chunk)
+        after = sim.counts.to_numpy()[:, 0].sum()
+        burning_updates += 0.5 * (before + after) * per_chunk
+    elapsed = time.perf_counter() - t0
+    total = per_chunk * chunks * envs
+    stats = sim.stats()
+    return {"map": land.name, "cells": land.rows * land.cols, "fire_percentage": fire_percentage, "envs": envs,
+            "steps": per_chunk * chunks, "seconds": elapsed, "env_steps_per_s": total / elapsed,
+            "burning_cell_updates_per_s": burning_updates / elapsed,
+            "mean_burning_end": float(stats["burning"].mean()),
+            "particles_end": float((stats["convection"] + stats["radiation"]).mean()),
+            "dropped": int(stats["dropped_convection"].sum() + stats["dropped_radiation"].sum()),
+            "memory_bytes_per_env": sim.memory_bytes_per_env()}
+
+
+def fire_speed(env_counts=(1, 16, 64, 256, 1024), steps: int = 2000, warmup: int = 500, big: bool = True,
+               arch: str = "cpu", threads: int | None = None) -> dict:
+    """The fire benchmark of BENCHMARKS.md: 35x36_Woods at 1.5 % and 35 % for each E, then big maps (E = 1)."""
+    runs = []
+    woods = load_map("35x36_Woods")
+    for pct in (0.015, 0.35):
+        for e in env_counts:
+            runs.append(time_fire(woods, pct, e, steps, warmup))
+    if big:
+        runs.append(time_fire(load_map("Borkenberge"), 0.015, 1, steps, warmup))
+        runs.append(time_fire(tiled_map(), 0.015, 1, steps, warmup))
+    for r in runs:
+        orig = ORIGINAL_STEPS_PER_S.get((r["map"], r["fire_percentage"]))
+        r["original_steps_per_s"] = orig
+        r["speedup_vs_original"] = r["env_steps_per_s"] / orig if orig else None
+    return {"arch": arch, "threads": threads or os.cpu_count(), "cpu_count": os.cpu_count(), "runs": runs}
+
+
+def format_fire_speed(report: dict) -> str:
+    lines = [f"arch {report['arch']}, threads {report['threads']} (cpu_count {report['cpu_count']})",
+             f"{'map':<16}{'cells':>9}{'ign':>7}{'E':>6}{'env-steps/s':>14}{'burning upd/s':>15}"
+             f"{'x original':>12}{'KiB/env':>9}{'dropped':>9}"]
+    base = {}
+    for r in report["runs"]:
+        key = (r["map"], r["fire_percentage"])
+        if r["envs"] == 1:
+            base[key] = r["env_steps_per_s"]
+        sp = f"{r['speedup_vs_original']:.1f}" if r["speedup_vs_original"] else "-"
+        lines.append(f"{r['map']:<16}{r['cells']:>9}{r['fire_percentage'] * 100:>6.1f}%{r['envs']:>6}"
+                     f"{r['env_steps_per_s']:>14,.0f}{r['burning_cell_updates_per_s']:>15,.0f}{sp:>12}"
+                     f"{r['memory_bytes_per_env'] / 1024:>9.1f}{r['dropped']:>9}")
+    for (m, p), one in base.items():
+        scale = [r for r in report["runs"] if (r["map"], r["fire_percentage"]) == (m, p) and r["envs"] > 1]
+        if scale:
+            best = max(scale, key=lambda r: r["env_steps_per_s"])
+            lines.append(f"scaling {m} {p * 100:g} %: best E={best['envs']} is {best['env_steps_per_s'] / one:.1f}x "
+                         f"E=1" + "".join(f"; E={r['envs']}/E=1 {r['env_steps_per_s'] / one:.1f}x"
+                                          for r in scale if r["envs"] == 256))
+    return "\n".join(lines)

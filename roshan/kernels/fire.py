@@ -5,7 +5,11 @@ and its particle pools) is done serially inside it. That keeps a step's cost pro
 map, makes the order of every update fixed (so a seed fixes the trajectory whatever the thread count) and costs
 one kernel launch per call however many envs or steps it advances.
 
-Cell times are integer step counts (firespin.md 4, "equivalent integer formulation").
+Cell timers are f64 sums of ``dt`` exactly as the reference accumulates them: with dt = 0.1 the sums run
+slightly below whole numbers, so most whole-second emissions and the burn-out of unrandomised cells happen one
+update after the integer count would say. Those events are synchronised across every cell lit at t = 0, so the
+difference shows at the reference's checkpoints (e.g. a third of the forest burns out at update 36,001, not
+36,000); integer step counters would not match it.
 """
 
 
@@ -21,12 +25,14 @@ from roshan.kernels.ignition import PATTERNS, light_initial_fires
 from roshan.maps import BURNED, BURNING, CLASSES, FLOODED, GENERIC_UNBURNED, LandCoverMap
 from roshan.runtime import ensure_taichi
 
-# Cell record (ti.Vector of i32 per cell): one cache line holds everything a step reads of a cell.
-C_STATE, C_FLAGS, C_IGN, C_BURN_TOTAL, C_BURN, C_EXPOSURE, C_FLOOD, C_VISIT, C_PERIODS = range(9)
-CELL_FIELDS = 9
+# Cell records: integers (state, flags, visit stamp, emission periods) and f64 timers (seconds).
+C_STATE, C_FLAGS, C_VISIT, C_PERIODS = range(4)
+CELL_FIELDS = 4
+T_IGN, T_BURN_LEFT, T_BURN_TIME, T_EXPOSURE, T_FLOOD = range(5)
+TIMER_FIELDS = 5
 FLAG_EXPOSED = 1  # the cell is in the exposed ("ticking") list
 FLAG_BURNED_DOWN = 2  # burned out completely once (a flood returns it to BURNED)
-NEVER = 2**30  # ignition threshold of cells that cannot ignite
+NEVER = -1.0  # tau_ign of cells that cannot ignite (the reference skips their exposure)
 
 # Per-env counters (E, N_COUNTS): list lengths and statistics.
 (N_BURNING, N_EXPOSED, N_FLOODED, N_CONV, N_RAD, N_BURNED, N_DROP_CONV, N_DROP_RAD, N_EXTINGUISHED,
@@ -88,6 +94,7 @@ class FireSim:
         self.land.from_numpy(np.ascontiguousarray(land.classes.reshape(-1), dtype=np.int32))
         self._alloc_class_table(land)
         self.cells = ti.Vector.field(CELL_FIELDS, ti.i32, (E, N))
+        self.timers = ti.Vector.field(TIMER_FIELDS, ti.f64, (E, N))
         self.burning = ti.field(ti.i32, (E, N))  # flat cell indices; also the generator's list of lit cells
         self.exposed = ti.field(ti.i32, (E, N))  # also the generator's BFS queue
         self.flooded = ti.field(ti.i32, (E, N))
@@ -118,7 +125,7 @@ class FireSim:
         cv = f.convection
         self.dt = f.dt
         self.uniform = bool(self.land_map.is_uniform)
-        self.flood_steps = max(1, math.ceil(f.flood_duration / f.dt - 1e-6))
+        self.flood_duration = f.flood_duration
         self.conv_on = bool(cv.enabled)
         self.rad_on = bool(f.radiation.enabled)
         u_prime = w.turbulence * w.speed
@@ -192,9 +199,11 @@ class FireSim:
         """Cell states of one env as a (rows, cols) int32 array (class id, or 12/13/14 burning/burned/flooded)."""
         return self.cells.to_numpy()[env, :, C_STATE].reshape(self.rows, self.cols)
 
-    def cell_records(self) -> np.ndarray:
-        """Every cell record, (E, rows, cols, CELL_FIELDS) int32 (tests and debugging)."""
-        return self.cells.to_numpy().reshape(self.num_envs, self.rows, self.cols, CELL_FIELDS)
+    def cell_records(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every cell record: ints (E, rows, cols, CELL_FIELDS) and f64 timers (E, rows, cols, TIMER_FIELDS)."""
+        shape = (self.num_envs, self.rows, self.cols)
+        return (self.cells.to_numpy().reshape(*shape, CELL_FIELDS),
+                self.timers.to_numpy().reshape(*shape, TIMER_FIELDS))
 
     def particles(self, env: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Live particles of one env: convection (n, 3) and radiation (m, 3) rows of (x1 m, x2 m, intensity)."""
@@ -211,7 +220,7 @@ class FireSim:
 
     def memory_bytes_per_env(self) -> int:
         """Bytes of Taichi field memory one env holds (cells, lists, particle pools)."""
-        per_cell = 4 * (CELL_FIELDS + 4)
+        per_cell = 4 * (CELL_FIELDS + 4) + 8 * TIMER_FIELDS
         return (self.num_cells * per_cell + 4 * (pt.CONV_FIELDS * self.conv_capacity
                                                  + pt.RAD_FIELDS * self.rad_capacity) + 4 * (N_COUNTS + 16))
 
@@ -257,18 +266,17 @@ class FireSim:
         """Per-cell randomisation of firespin.md 2.3: durations x (1 + s*u), s in {-1,0,1}, u ~ U(0.1, 0.2)."""
         cls = self.land[c]
         k = rng.key(self.env_key[e], rng.DOMAIN_CELLS, c)
-        s1 = ti.cast(rng.uniform_int(rng.key(k, 0, 0), 3) - 1, ti.f32)
-        u1 = 0.1 + 0.1 * rng.uniform(rng.key(k, 1, 0))
-        s2 = ti.cast(rng.uniform_int(rng.key(k, 2, 0), 3) - 1, ti.f32)
-        u2 = 0.1 + 0.1 * rng.uniform(rng.key(k, 3, 0))
-        tau_burn = self.cls_tau_burn[cls] * (1.0 + s1 * u1)
-        tau_ign = self.cls_tau_ign[cls] * (1.0 + s2 * u2)
-        ign_steps = NEVER
+        s1 = ti.cast(rng.uniform_int(rng.key(k, 0, 0), 3) - 1, ti.f64)
+        u1 = 0.1 + 0.1 * ti.cast(rng.uniform(rng.key(k, 1, 0)), ti.f64)
+        s2 = ti.cast(rng.uniform_int(rng.key(k, 2, 0), 3) - 1, ti.f64)
+        u2 = 0.1 + 0.1 * ti.cast(rng.uniform(rng.key(k, 3, 0)), ti.f64)
+        tau_burn = ti.cast(self.cls_tau_burn[cls], ti.f64) * (1.0 + s1 * u1)
+        tau_ign = ti.f64(NEVER)
         if self.cls_ignitable[cls] != 0:
-            ign_steps = ti.max(1, ti.cast(ti.ceil(tau_ign / self.dt - 1e-4), ti.i32))
-        burn_total = ti.max(1, ti.cast(ti.ceil(tau_burn / self.dt - 1e-4), ti.i32))
+            tau_ign = ti.cast(self.cls_tau_ign[cls], ti.f64) * (1.0 + s2 * u2)
         periods = _period(tau_burn, self.cls_n_conv[cls]) | (_period(tau_burn, self.cls_n_rad[cls]) << 16)
-        self.cells[e, c] = ti.Vector([cls, 0, ign_steps, burn_total, 0, 0, 0, -1, periods], ti.i32)
+        self.cells[e, c] = ti.Vector([cls, 0, -1, periods], ti.i32)
+        self.timers[e, c] = ti.Vector([tau_ign, tau_burn, 0.0, 0.0, 0.0], ti.f64)
         self.mark[e, c] = 0
 
     @ti.kernel
@@ -348,15 +356,15 @@ class FireSim:
         w = 0
         for k in range(self.counts[e, N_FLOODED]):
             c = self.flooded[e, k]
-            f = self.cells[e, c][C_FLOOD] + 1
-            if f >= self.flood_steps:  # the flood ends: back to the original class, or burned
-                self.cells[e, c][C_FLOOD] = 0
+            f = self.timers[e, c][T_FLOOD] + ti.f64(self.dt)
+            if f >= self.flood_duration:  # the flood ends: back to the original class, or burned
+                self.timers[e, c][T_FLOOD] = self.flood_duration
                 state = self.land[c]
                 if (self.cells[e, c][C_FLAGS] & FLAG_BURNED_DOWN) != 0:
                     state = BURNED
                 self.cells[e, c][C_STATE] = state
             else:
-                self.cells[e, c][C_FLOOD] = f
+                self.timers[e, c][T_FLOOD] = f
                 self.flooded[e, w] = c
                 w += 1
         self.counts[e, N_FLOODED] = w
@@ -367,14 +375,14 @@ class FireSim:
         w = 0
         for k in range(self.counts[e, N_EXPOSED]):
             c = self.exposed[e, k]
-            rec = self.cells[e, c]
-            if rec[C_VISIT] != t:
-                self.cells[e, c][C_FLAGS] = rec[C_FLAGS] & ~FLAG_EXPOSED
+            flags = self.cells[e, c][C_FLAGS]
+            if self.cells[e, c][C_VISIT] != t:
+                self.cells[e, c][C_FLAGS] = flags & ~FLAG_EXPOSED
             else:
-                exposure = rec[C_EXPOSURE] + 1
-                self.cells[e, c][C_EXPOSURE] = exposure
-                if exposure >= rec[C_IGN]:
-                    self.cells[e, c][C_FLAGS] = rec[C_FLAGS] & ~FLAG_EXPOSED
+                exposure = self.timers[e, c][T_EXPOSURE] + ti.f64(self.dt)
+                self.timers[e, c][T_EXPOSURE] = exposure
+                if exposure >= self.timers[e, c][T_IGN]:
+                    self.cells[e, c][C_FLAGS] = flags & ~FLAG_EXPOSED
                     self._ignite(e, c)
                 else:
                     self.exposed[e, w] = c
@@ -393,22 +401,26 @@ class FireSim:
         w = 0
         for k in range(self.counts[e, N_BURNING]):
             c = self.burning[e, k]
-            rec = self.cells[e, c]
-            b = rec[C_BURN] + 1
-            self.cells[e, c][C_BURN] = b
-            # Emission when the burning time crosses a whole second k >= 1 that is a multiple of the period.
-            sec_new = ti.cast(ti.floor(ti.cast(b, ti.f64) * self.dt + 1e-9), ti.i32)
-            sec_old = ti.cast(ti.floor(ti.cast(b - 1, ti.f64) * self.dt + 1e-9), ti.i32)
-            if sec_new != sec_old and sec_new > 0:
+            timer = self.timers[e, c]
+            before = timer[T_BURN_TIME]
+            after = before + ti.f64(self.dt)
+            left = timer[T_BURN_LEFT] - ti.f64(self.dt)
+            self.timers[e, c][T_BURN_TIME] = after
+            self.timers[e, c][T_BURN_LEFT] = left
+            # Emit when the burning time crosses a whole second k >= 1 that is a multiple of the period.
+            sec_old = ti.cast(before, ti.i32)
+            sec_new = ti.cast(ti.floor(after), ti.i32)
+            if sec_new != sec_old:
+                periods = self.cells[e, c][C_PERIODS]
                 if ti.static(self.conv_on):
-                    if sec_new % (rec[C_PERIODS] & 0xFFFF) == 0:
+                    if sec_new % (periods & 0xFFFF) == 0:
                         self._emit_convection(e, c, step_key)
                 if ti.static(self.rad_on):
-                    if sec_new % (rec[C_PERIODS] >> 16) == 0:
+                    if sec_new % (periods >> 16) == 0:
                         self._emit_radiation(e, c, step_key)
-            if b >= rec[C_BURN_TOTAL]:
+            if left <= 0.0:
                 self.cells[e, c][C_STATE] = BURNED
-                self.cells[e, c][C_FLAGS] = rec[C_FLAGS] | FLAG_BURNED_DOWN
+                self.cells[e, c][C_FLAGS] |= FLAG_BURNED_DOWN
                 self.counts[e, N_BURNED] += 1
             else:
                 self.burning[e, w] = c
@@ -473,7 +485,7 @@ class FireSim:
         if state == BURNING:
             was_burning = 1
             _remove_from_list(self.burning, self.counts, e, N_BURNING, c)
-            self.cells[e, c][C_EXPOSURE] = 0
+            self.timers[e, c][T_EXPOSURE] = 0.0
             self.counts[e, N_EXTINGUISHED] += 1
         elif (self.cells[e, c][C_FLAGS] & FLAG_EXPOSED) != 0:
             _remove_from_list(self.exposed, self.counts, e, N_EXPOSED, c)
@@ -483,7 +495,7 @@ class FireSim:
             self.flooded[e, n] = c
             self.counts[e, N_FLOODED] = n + 1
         self.cells[e, c][C_STATE] = FLOODED
-        self.cells[e, c][C_FLOOD] = 0
+        self.timers[e, c][T_FLOOD] = 0.0
         self._delete_particles_in(e, c)
         return was_burning
 
@@ -526,7 +538,7 @@ class FireSim:
 
 
 @ti.func
-def _period(tau_burn: ti.f32, n: ti.i32) -> ti.i32:
+def _period(tau_burn: ti.f64, n: ti.i32) -> ti.i32:
     """Emission period in whole seconds: max(1, floor((tau_burn - 1) / n)) (firespin.md 2.3)."""
     p = 1
     if n > 0:

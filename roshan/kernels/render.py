@@ -26,16 +26,15 @@ Backends only differ in how the finished field leaves Taichi:
 - ``raster``: ``image.to_numpy()``, PNGs written with PIL. No Vulkan needed.
 - ``ggui``: the field is copied, flipped, into a ``(W, H)`` field (GGUI indexes images as ``(x, y)`` with
   ``(0, 0)`` at the bottom-left) and set as the canvas image of an offscreen ``ti.ui.Window``; frames are
-  read back with ``get_image_buffer_as_numpy`` and PNGs written by ``window.save_image`` (RGBA). The ``u8``
-  field reaches GGUI's 8-bit target unchanged, so both backends give identical pixels.
+  read back with ``get_image_buffer_as_numpy``. The ``u8`` field reaches GGUI's 8-bit target unchanged, so both
+  backends give identical pixels. PNGs are written with PIL from the rendered array on both backends (RGB, and
+  faster than GGUI's RGBA ``window.save_image``).
 - ``auto``: ``ggui`` if an offscreen window opens, else ``raster`` with one warning.
 
 Taichi 1.7 crashes (at ``destroy`` or at interpreter exit) when two GGUI windows are alive at once, so the
 process holds at most one: renderers of the same size share it, and a renderer of another size replaces it
 (about 0.2 s to open).
 """
-
-from __future__ import annotations
 
 import math
 import warnings
@@ -63,6 +62,7 @@ NO_GGUI_HINT = ("GGUI/Vulkan is unavailable, so frames are rendered with the ras
                 "For GGUI install a Vulkan driver, e.g. `apt-get install -y mesa-vulkan-drivers` (Debian).")
 
 Overlay = Callable[[object, int], None]
+# No `from __future__ import annotations` here: Taichi reads the ti.f32 / ti.template() annotations at runtime.
 
 
 def default_cell_px(rows: int, cols: int) -> int:
@@ -191,19 +191,29 @@ class FrameRenderer:
         if self.backend == "raster":
             self.draw(overlay)
             return self.image.to_numpy()
-        window = self._present(overlay)
-        buf = window.get_image_buffer_as_numpy()  # (W, H, 4) floats in 0..1, y = 0 at the bottom
+        buf = self.present(overlay).get_image_buffer_as_numpy()  # (W, H, 4) floats in 0..1, y = 0 at the bottom
         return np.ascontiguousarray(np.rint(buf[:, ::-1, :3] * 255.0).astype(np.uint8).transpose(1, 0, 2))
 
     def save_png(self, path, overlay: Overlay | None = None) -> Path:
-        """Render a frame and write it as a PNG (RGB from the raster backend, RGBA from GGUI); returns the path."""
+        """Render a frame and write it as an RGB PNG (with PIL on both backends); returns the path."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        if self.backend == "raster":
-            Image.fromarray(self.render(overlay)).save(path)
-        else:
-            self._present(overlay).save_image(str(path))
+        Image.fromarray(self.render(overlay)).save(path)
         return path
+
+    def present(self, overlay: Overlay | None = None):
+        """GGUI only: draw the frame onto the window's canvas and return the window.
+
+        The next ``window.get_image_buffer_as_numpy()`` or ``window.save_image(path)`` consumes the frame (a
+        second read without a new ``present`` comes back black).
+        """
+        if self.backend != "ggui":
+            raise RuntimeError("present() needs the ggui backend; this renderer uses raster")
+        self.draw(overlay)
+        self._flip_to_display()
+        window = self.window
+        window.get_canvas().set_image(self._display)
+        return window
 
     def close(self) -> None:
         """Give up this renderer's claim on the shared GGUI window (destroyed once no renderer uses it)."""
@@ -223,14 +233,6 @@ class FrameRenderer:
             if not _warned_no_ggui:
                 _warned_no_ggui = True
                 warnings.warn(NO_GGUI_HINT, RuntimeWarning, stacklevel=3)
-
-    def _present(self, overlay: Overlay | None):
-        """Draw the frame and hand it to the window's canvas; the next read or save of the window consumes it."""
-        self.draw(overlay)
-        self._flip_to_display()
-        window = self.window
-        window.get_canvas().set_image(self._display)
-        return window
 
     # ------------------------------------------------------------------------------------------ kernels
 
@@ -267,9 +269,11 @@ class FrameRenderer:
         if ti.static(ring):
             colour = 0.5 * (colour + 255.0)
             inner = ti.max(r - ti.max(1.0, r / 3.0), 0.0)
-        y0, y1 = ti.max(0, ti.cast(ti.floor(cy - r), ti.i32)), ti.min(self.height, ti.cast(ti.ceil(cy + r), ti.i32))
-        x0, x1 = ti.max(0, ti.cast(ti.floor(cx - r), ti.i32)), ti.min(self.width, ti.cast(ti.ceil(cx + r), ti.i32))
-        for py, px in ti.ndrange((y0, y1), (x0, x1)):
+        row0 = ti.max(0, ti.cast(ti.floor(cy - r), ti.i32))
+        row1 = ti.min(self.height, ti.cast(ti.ceil(cy + r), ti.i32))
+        col0 = ti.max(0, ti.cast(ti.floor(cx - r), ti.i32))
+        col1 = ti.min(self.width, ti.cast(ti.ceil(cx + r), ti.i32))
+        for py, px in ti.ndrange((row0, row1), (col0, col1)):
             d2 = (py + 0.5 - cy) ** 2 + (px + 0.5 - cx) ** 2
             if inner * inner <= d2 <= r * r:
                 self.image[py, px] = blend(self.image[py, px], colour, rgba[3])
@@ -278,8 +282,8 @@ class FrameRenderer:
     def _draw_wind_arrow(self, cy: ti.f32, cx: ti.f32, radius: ti.f32, d1: ti.f32, d2: ti.f32):
         """Dark disc of ``radius`` px at (cy, cx) with a white arrow along (d1, d2), or a dot if (d1, d2) = 0."""
         half = 0.75 * radius  # arrow from -half to +half along the wind
-        head = 0.45 * radius
-        head_w = 0.35 * radius
+        head = 0.5 * radius
+        head_w = 0.45 * radius
         shaft_w = ti.max(1.0, radius / 8.0)
         backdrop = ti.Vector(ARROW_BACKDROP, ti.f32)
         white = ti.Vector([255, 255, 255], ti.u8)
@@ -315,13 +319,22 @@ def _arrow_geometry(height: int, width: int) -> tuple[float, float, float] | Non
 
 # ---------------------------------------------------------------------------------------------- GGUI window
 
-_shared: dict[str, object] = {"window": None, "key": None, "users": 0}
+# The runtime is kept (not its id) so a re-initialised Taichi can never look like the one the window belongs to.
+_shared: dict[str, object] = {"window": None, "res": None, "runtime": None, "users": 0}
 _warned_no_ggui = False
 
 
 def _open_window(res: tuple[int, int]):
     """A new offscreen GGUI window of ``res = (width, height)``; raises if GGUI/Vulkan is unavailable."""
-    return ti.ui.Window(WINDOW_TITLE, res, show_window=False)
+    window = ti.ui.Window(WINDOW_TITLE, res, show_window=False)
+    _shared.update(window=window, res=tuple(res), runtime=impl.get_runtime())
+    return window
+
+
+def _close_window() -> None:
+    if _shared["window"] is not None:
+        _shared["window"].destroy()
+    _shared.update(window=None, res=None, runtime=None)
 
 
 def _acquire_window(res: tuple[int, int], held):
@@ -329,13 +342,9 @@ def _acquire_window(res: tuple[int, int], held):
 
     Replaces the window when the size differs or when Taichi was re-initialised since it was opened.
     """
-    key = (tuple(res), id(impl.get_runtime()))
-    if _shared["key"] != key:
-        if _shared["window"] is not None:
-            _shared["window"].destroy()
-            _shared["window"] = _shared["key"] = None
-        _shared["window"] = _open_window(res)
-        _shared["key"] = key
+    if _shared["res"] != tuple(res) or _shared["runtime"] is not impl.get_runtime():
+        _close_window()
+        _open_window(res)
     if held is None:
         _shared["users"] += 1
     return _shared["window"]
@@ -343,17 +352,16 @@ def _acquire_window(res: tuple[int, int], held):
 
 def _release_window() -> None:
     _shared["users"] = max(0, _shared["users"] - 1)
-    if _shared["users"] == 0 and _shared["window"] is not None:
-        _shared["window"].destroy()
-        _shared["window"] = _shared["key"] = None
+    if _shared["users"] == 0:
+        _close_window()
 
 
 def ggui_available() -> bool:
-    """Whether an offscreen GGUI window can be opened in this process (opens the shared window if needed)."""
+    """Whether an offscreen GGUI window can be opened in this process (opens the shared window if none is open)."""
+    if _shared["window"] is not None:
+        return True
     try:
-        if _shared["window"] is None:
-            _shared["window"] = _open_window((16, 16))
-            _shared["key"] = ((16, 16), id(impl.get_runtime()))
+        _open_window((16, 16))
         return True
     except Exception:  # any failure to open a window means no usable GGUI here
         return False

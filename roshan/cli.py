@@ -1,0 +1,187 @@
+"""``roshan`` command line: parses options and calls into the package; no logic of its own."""
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from roshan.config import ConfigError, load_config
+from roshan.maps import MapError
+
+ARCH = click.option("--arch", type=click.Choice(["cpu", "cuda", "vulkan", "auto"]), default=None,
+                    help="Where kernels run (default: config's sim.arch, cpu).")
+THREADS = click.option("--threads", type=click.IntRange(min=1), default=None, help="CPU threads (default: all).")
+SETS = click.option("--set", "sets", multiple=True, metavar="KEY=VALUE",
+                    help="Override a config key, e.g. --set fire.dt=0.05 (repeatable).")
+CONFIG = click.option("--config", "-c", "config_path", type=click.Path(dir_okay=False), default=None,
+                      help="YAML config (see configs/); defaults are the spec's.")
+
+
+def _fail(exc: Exception) -> None:
+    raise click.ClickException(str(exc)) from exc
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="roshan")
+def main():
+    """ROSHAN-Taichi: batched FireSPIN wildfire simulation and hierarchical RL for fire-fighting UAVs."""
+
+
+# ------------------------------------------------------------------------------------------------ simulate
+
+
+@main.command()
+@CONFIG
+@click.option("--map", "map_name", default=None, help="Bundled map name, 'uniform', or a GeoTIFF path.")
+@click.option("--envs", type=click.IntRange(min=1), default=None, help="Environments advanced together.")
+@click.option("--steps", type=click.IntRange(min=0), default=3000, show_default=True, help="Fire updates (dt each).")
+@click.option("--seed", type=click.IntRange(min=0), default=None, help="Seed of every random stream.")
+@click.option("--fire-percentage", type=float, default=None, help="Fraction of cells ignited at reset (0..1).")
+@click.option("--clusters", type=int, default=None, help="Number of fire clusters (or rings).")
+@click.option("--pattern", type=click.Choice(["cluster", "scattered", "ring", "random"]), default=None)
+@click.option("--wind-speed", type=float, default=None, help="Wind speed (m/s).")
+@click.option("--wind-direction", type=float, default=None, help="Degrees from south towards east; -1 = random.")
+@click.option("--frames", type=click.Path(file_okay=False), default=None, help="Write PNG frames of env 0 here.")
+@click.option("--every", type=click.IntRange(min=1), default=100, show_default=True,
+              help="Record statistics (and a frame) every K steps.")
+@click.option("--gif", type=click.Path(dir_okay=False), default=None, help="Stitch the frames into this GIF.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
+              help="Write {config, series, timing} here.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@SETS
+@ARCH
+@THREADS
+def simulate(config_path, map_name, envs, steps, seed, fire_percentage, clusters, pattern, wind_speed,
+             wind_direction, frames, every, gif, json_path, quiet, sets, arch, threads):
+    """Run the fire model on E envs of a map and summarise (optionally frames, a GIF and a JSON series)."""
+    from roshan import simulate as sim_mod
+
+    flags = {"map.name": map_name, "sim.envs": envs, "sim.seed": seed, "ignition.fire_percentage": fire_percentage,
+             "ignition.clusters": clusters, "ignition.pattern": pattern, "wind.speed": wind_speed,
+             "wind.direction": wind_direction, "sim.arch": arch, "sim.threads": threads}
+    overrides = [f"{k}={v}" for k, v in flags.items() if v is not None] + list(sets)
+    try:
+        cfg = load_config(config_path, overrides)
+        result = sim_mod.run_simulation(cfg, steps, every, Path(frames) if frames else None,
+                                        Path(gif) if gif else None, progress=not quiet)
+    except (ConfigError, MapError, ValueError, FileNotFoundError) as exc:
+        _fail(exc)
+    for line in sim_mod.summary_lines(result):
+        click.echo(line)
+    if json_path:
+        sim_mod.write_json(cfg, result, Path(json_path))
+        click.echo(f"json: {json_path}")
+
+
+# ------------------------------------------------------------------------------------------------ maps
+
+
+@main.group()
+def maps():
+    """List, inspect and crop CLC+ land-cover maps."""
+
+
+@maps.command("list")
+def maps_list():
+    """The bundled sample maps with their sizes."""
+    from roshan.maps import bundled_maps, load_map
+
+    for name in bundled_maps():
+        m = load_map(name)
+        click.echo(f"{name:<18} {m.rows:>4} x {m.cols:<4} cells  {m.rows * m.cell_size / 1000:5.2f} x "
+                   f"{m.cols * m.cell_size / 1000:5.2f} km")
+    click.echo(f"{'uniform':<18}   50 x 50   cells  generic burnable map (class 16)")
+
+
+@maps.command("show")
+@click.argument("name_or_path")
+@click.option("--band", type=click.IntRange(min=1), default=None, help="Band of a multi-band raster.")
+def maps_show(name_or_path, band):
+    """Size in cells and metres, CRS and class histogram of a map."""
+    from roshan.maps import describe_map, load_map
+
+    try:
+        click.echo(describe_map(load_map(name_or_path, band=band)))
+    except MapError as exc:
+        _fail(exc)
+
+
+@maps.command("crop")
+@click.argument("source", type=click.Path(dir_okay=False))
+@click.option("--bounds", nargs=4, type=float, required=True, metavar="W S E N", help="Window to cut out.")
+@click.option("--crs", default=None, help="CRS of --bounds (e.g. EPSG:4326); default: the raster's own.")
+@click.option("--output", "-o", type=click.Path(dir_okay=False), required=True, help="GeoTIFF to write.")
+def maps_crop(source, bounds, crs, output):
+    """Cut a window out of a (possibly huge) CLC+ raster, reading only that window."""
+    from roshan.maps import crop_map, describe_map
+
+    try:
+        m = crop_map(source, tuple(bounds), output, bounds_crs=crs)
+    except MapError as exc:
+        _fail(exc)
+    click.echo(f"wrote {output}")
+    click.echo(describe_map(m))
+
+
+# ------------------------------------------------------------------------------------------------ bench
+
+
+@main.group()
+def bench():
+    """Reproducible benchmarks (see BENCHMARKS.md)."""
+
+
+@bench.command("fidelity")
+@click.option("--seeds", type=click.IntRange(min=1), default=20, show_default=True)
+@click.option("--condition", "conditions", multiple=True, help="Only these reference conditions (CSV stems).")
+@click.option("--every", type=click.IntRange(min=500), default=5000, show_default=True, help="Table row spacing.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None)
+@ARCH
+@THREADS
+def bench_fidelity(seeds, conditions, every, json_path, arch, threads):
+    """Fire statistics against the original's (shared/reference): our seed means vs its seed band."""
+    from roshan import bench as b
+    from roshan.runtime import init_taichi
+
+    init_taichi(arch or "cpu", threads)
+    conds = [c for c in b.FIDELITY_CONDITIONS if not conditions or c.name in conditions]
+    if not conds:
+        _fail(ValueError(f"--condition: none of {conditions}; known: {[c.name for c in b.FIDELITY_CONDITIONS]}"))
+    try:
+        results = b.fidelity(seeds, conds)
+    except FileNotFoundError as exc:
+        _fail(exc)
+    for name, res in results.items():
+        click.echo(b.format_fidelity_table(name, res, every))
+    if json_path:
+        Path(json_path).write_text(json.dumps(results, indent=1))
+
+
+@bench.command("fire")
+@click.option("--envs", "env_counts", default="1,16,64,256,1024", show_default=True, help="Comma-separated E values.")
+@click.option("--steps", type=click.IntRange(min=1), default=2000, show_default=True, help="Timed updates per run.")
+@click.option("--warmup", type=click.IntRange(min=0), default=500, show_default=True)
+@click.option("--big/--no-big", default=True, show_default=True, help="Also one env on Borkenberge and a 1M-cell map.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None)
+@ARCH
+@THREADS
+def bench_fire(env_counts, steps, warmup, big, json_path, arch, threads):
+    """Fire-model throughput: env-steps/s and burning-cell updates/s against the original's figures."""
+    from roshan import bench as b
+    from roshan.runtime import init_taichi
+
+    used = init_taichi(arch or "cpu", threads)
+    try:
+        counts = [int(x) for x in env_counts.split(",") if x.strip()]
+    except ValueError as exc:
+        _fail(ValueError(f"--envs: expected comma-separated integers, got {env_counts!r}"))
+        raise exc
+    report = b.fire_speed(counts, steps, warmup, big=big, arch=used, threads=threads)
+    click.echo(b.format_fire_speed(report))
+    if json_path:
+        Path(json_path).write_text(json.dumps(report, indent=1))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
