@@ -1,7 +1,6 @@
 """Benchmarks behind ``roshan bench``: fire-model fidelity against the reference statistics, and speed."""
 
 import csv
-import json
 import os
 import time
 from dataclasses import dataclass
@@ -9,10 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from roshan.config import Config, FireConfig, IgnitionConfig, MapConfig, SimConfig, WindConfig
+from roshan.config import Config, IgnitionConfig, MapConfig, SimConfig, WindConfig
 from roshan.kernels.fire import FireSim
 from roshan.maps import load_map
-from roshan.runtime import init_taichi
 
 REFERENCE_QUANTITIES = ("burning", "burned", "convection", "radiation")
 

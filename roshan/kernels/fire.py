@@ -173,7 +173,7 @@ class FireSim:
 
         Redraws every cell's durations, clears particles and lists, draws the wind and lights the initial fires.
         """
-        mask = self._all if mask is None else mask
+        mask = self._all if mask is None else self._int32(mask, (self.num_envs,), "reset mask")
         self._reset_envs(mask, rng.base_key(self.seed))
 
     def step(self, n: int = 1) -> None:
@@ -188,7 +188,8 @@ class FireSim:
             requests: (E, M) int32 flat cell indices ``i * cols + j``; negative entries are ignored.
             extinguished: (E, M) int32 output, 1 where the cell was burning (and is now flooded), else 0.
         """
-        self._flood(requests, extinguished)
+        requests = self._int32(requests, (self.num_envs, None), "flood requests")
+        self._flood(requests, self._int32(extinguished, requests.shape, "flood output", copy_ok=False))
 
     def stats(self) -> dict[str, np.ndarray]:
         """Per-env counters, each an (E,) int array (a host copy: not for the step loop)."""
@@ -227,11 +228,24 @@ class FireSim:
     # Test hooks: drive the cell state machine directly, without particles or the generator.
     def ignite_cells(self, mask) -> None:
         """Ignite the cells where ``mask`` (E, rows*cols int32) is non-zero and that can ignite."""
-        self._ignite_cells(mask)
+        self._ignite_cells(self._int32(mask, (self.num_envs, self.num_cells), "ignition mask"))
 
     def prescribe_exposure(self, mask) -> None:
         """Mark cells (E, rows*cols int32 mask) as visited by a particle in the next update."""
-        self._prescribe_exposure(mask)
+        self._prescribe_exposure(self._int32(mask, (self.num_envs, self.num_cells), "exposure mask"))
+
+    @staticmethod
+    def _int32(x, shape, what, copy_ok=True):
+        """Check an int array's shape; numpy inputs become contiguous int32 (torch tensors must already be)."""
+        got = tuple(x.shape)
+        if len(got) != len(shape) or any(want is not None and g != want for g, want in zip(got, shape)):
+            want = tuple("M" if w is None else w for w in shape)
+            raise ValueError(f"{what}: expected shape {want}, got {got}")
+        if isinstance(x, np.ndarray):
+            if not copy_ok and (x.dtype != np.int32 or not x.flags.c_contiguous):
+                raise ValueError(f"{what}: expected a C-contiguous int32 array (written in place)")
+            return np.ascontiguousarray(x, dtype=np.int32)
+        return x
 
     # ------------------------------------------------------------------------------------------ kernels
 

@@ -37,6 +37,7 @@ process holds at most one: renderers of the same size share it, and a renderer o
 """
 
 import math
+import sys
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -170,7 +171,12 @@ class FrameRenderer:
     def window(self):
         """The offscreen ``ti.ui.Window`` this renderer draws into, or ``None`` on the raster backend."""
         if self.backend == "ggui":
-            self._window = _acquire_window((self.width, self.height), self._window)
+            try:
+                self._window = _acquire_window((self.width, self.height), self._window)
+            except Exception as err:  # say what to do instead of Taichi's bare "Vulkan must be available"
+                raise RuntimeError(f"backend='ggui': GGUI/Vulkan is unavailable ({err}). Install a Vulkan "
+                                   "driver (`apt-get install -y mesa-vulkan-drivers` on Debian) or use "
+                                   "backend='raster'.") from err
         return self._window
 
     def draw(self, overlay: Overlay | None = None) -> None:
@@ -232,7 +238,7 @@ class FrameRenderer:
             self._backend = "raster"
             if not _warned_no_ggui:
                 _warned_no_ggui = True
-                warnings.warn(NO_GGUI_HINT, RuntimeWarning, stacklevel=3)
+                warnings.warn(NO_GGUI_HINT, RuntimeWarning, stacklevel=_user_stacklevel())
 
     # ------------------------------------------------------------------------------------------ kernels
 
@@ -315,6 +321,14 @@ def _arrow_geometry(height: int, width: int) -> tuple[float, float, float] | Non
     if 2.0 * (radius + margin) > min(height, width):
         return None
     return margin + radius, width - margin - radius, radius
+
+
+def _user_stacklevel() -> int:
+    """``warnings.warn`` stacklevel of the first caller outside this module and Taichi's method wrappers."""
+    frame, level = sys._getframe(1), 1
+    while frame is not None and (frame.f_code.co_filename == __file__ or "taichi" in frame.f_code.co_filename):
+        frame, level = frame.f_back, level + 1
+    return level
 
 
 # ---------------------------------------------------------------------------------------------- GGUI window

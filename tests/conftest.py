@@ -1,0 +1,19 @@
+"""Shared fixtures: Taichi on the CPU once per session, and small maps built in code."""
+
+import numpy as np
+import pytest
+
+from roshan.runtime import init_taichi
+
+
+@pytest.fixture(scope="session", autouse=True)
+def taichi_cpu():
+    init_taichi("cpu")
+
+
+def make_map(classes, name="test"):
+    """A LandCoverMap from a 2-D array of class ids (10 m cells)."""
+    from roshan.maps import LandCoverMap
+
+    return LandCoverMap(name=name, classes=np.asarray(classes, dtype=np.int32), cell_size=10.0, crs=None,
+                        transform=None, source=None)
