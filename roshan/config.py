@@ -81,7 +81,7 @@ class WindConfig:
 
     speed: float = num(10.0, 0.0, 100.0, doc="10-m wind speed U_w (m/s)")
     direction: float = num(-1.0, -1.0, 360.0, hi_open=True,
-                           doc="degrees from the row axis (south) towards the column axis (east); -1 = random per episode")
+                           doc="degrees from the row axis (south) towards the column axis (east); -1 = random")
     turbulence: float = num(0.314, 0.0, doc="turbulence ratio a (u' = a * U_w)")
 
 
@@ -137,7 +137,7 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
         ConfigError: naming the file, the key and what was expected.
     """
     data: dict = {}
-    where = "defaults"
+    where = "--set" if overrides else "defaults"
     if path is not None:
         where = str(path)
         try:

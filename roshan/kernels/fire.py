@@ -238,7 +238,7 @@ class FireSim:
     def _int32(x, shape, what, copy_ok=True):
         """Check an int array's shape; numpy inputs become contiguous int32 (torch tensors must already be)."""
         got = tuple(x.shape)
-        if len(got) != len(shape) or any(want is not None and g != want for g, want in zip(got, shape)):
+        if len(got) != len(shape) or any(want is not None and g != want for g, want in zip(got, shape, strict=True)):
             want = tuple("M" if w is None else w for w in shape)
             raise ValueError(f"{what}: expected shape {want}, got {got}")
         if isinstance(x, np.ndarray):
