@@ -34,15 +34,12 @@ FIDELITY_CONDITIONS = (
 
 
 def reference_dir() -> Path:
-    """Where the reference CSVs live: $ROSHAN_REFERENCE, else ../shared/reference next to the checkout."""
+    """Where the reference CSVs live: $ROSHAN_REFERENCE if set, else the copy bundled with the package."""
     env = os.environ.get("ROSHAN_REFERENCE")
-    candidates = [Path(env)] if env else []
-    here = Path(__file__).resolve().parent.parent
-    candidates += [here.parent / "shared" / "reference", here / "shared" / "reference", Path.cwd() / "reference"]
-    for c in candidates:
-        if (c / "woods35x36_p0015.csv").exists():
-            return c
-    raise FileNotFoundError("reference CSVs not found; set ROSHAN_REFERENCE to the folder holding woods35x36_p0015.csv")
+    folder = Path(env) if env else Path(__file__).resolve().parent / "data" / "reference"
+    if not (folder / "woods35x36_p0015.csv").exists():
+        raise FileNotFoundError(f"{folder}: no reference CSVs (woods35x36_p0015.csv, ...); set ROSHAN_REFERENCE")
+    return folder
 
 
 def load_reference(name: str, folder: Path | None = None) -> dict[str, np.ndarray]:
@@ -191,7 +188,7 @@ def time_fire(land, fire_percentage: float, envs: int, steps: int, warmup: int, 
             "memory_bytes_per_env": sim.memory_bytes_per_env()}
 
 
-def fire_speed(env_counts=(1, 16, 64, 256, 1024), steps: int = 2000, warmup: int = 500, big: bool = True,
+def fire_speed(env_counts=(1, 16, 64, 256, 1024), steps: int = 50_000, warmup: int = 100, big: bool = True,
                arch: str = "cpu", threads: int | None = None) -> dict:
     """The fire benchmark of BENCHMARKS.md: 35x36_Woods at 1.5 % and 35 % for each E, then big maps (E = 1)."""
     runs = []
@@ -230,3 +227,35 @@ def format_fire_speed(report: dict) -> str:
                          f"E=1" + "".join(f"; E={r['envs']}/E=1 {r['env_steps_per_s'] / one:.1f}x"
                                           for r in scale if r["envs"] == 256))
     return "\n".join(lines)
+
+
+def plot_fidelity(results: dict, path: Path) -> Path:
+    """One panel per (condition, quantity): reference mean and min..max band against our seed mean and range."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(results)
+    fig, axes = plt.subplots(len(names), len(REFERENCE_QUANTITIES), figsize=(16, 3.0 * len(names)), squeeze=False)
+    for r, name in enumerate(names):
+        rows = results[name]["rows"]
+        t = np.array([row["step"] for row in rows]) * 0.1
+        for c, q in enumerate(REFERENCE_QUANTITIES):
+            ax = axes[r, c]
+            v = {key: np.array([row[q][key] for row in rows]) for key in rows[0][q]}
+            ax.fill_between(t, v["ref_min"], v["ref_max"], color="tab:orange", alpha=0.25, label="reference min..max")
+            ax.plot(t, v["ref_mean"], color="tab:orange", label="reference mean")
+            ax.fill_between(t, v["ours_min"], v["ours_max"], color="tab:blue", alpha=0.12, label="ours min..max")
+            ax.plot(t, v["ours_mean"], color="tab:blue", label="ours mean")
+            ax.set_title(f"{name}: {q}", fontsize=9)
+            ax.tick_params(labelsize=7)
+            if r == len(names) - 1:
+                ax.set_xlabel("simulated time (s)", fontsize=8)
+    axes[0, 0].legend(fontsize=7)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path

@@ -137,9 +137,10 @@ def bench():
 @click.option("--condition", "conditions", multiple=True, help="Only these reference conditions (CSV stems).")
 @click.option("--every", type=click.IntRange(min=500), default=5000, show_default=True, help="Table row spacing.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None)
+@click.option("--plot", "plot_path", type=click.Path(dir_okay=False), default=None, help="PNG of every curve.")
 @ARCH
 @THREADS
-def bench_fidelity(seeds, conditions, every, json_path, arch, threads):
+def bench_fidelity(seeds, conditions, every, json_path, plot_path, arch, threads):
     """Fire statistics against the original's (shared/reference): our seed means vs its seed band."""
     from roshan import bench as b
     from roshan.runtime import init_taichi
@@ -156,12 +157,16 @@ def bench_fidelity(seeds, conditions, every, json_path, arch, threads):
         click.echo(b.format_fidelity_table(name, res, every))
     if json_path:
         Path(json_path).write_text(json.dumps(results, indent=1))
+    if plot_path:
+        click.echo(f"plot: {b.plot_fidelity(results, Path(plot_path))}")
 
 
 @bench.command("fire")
 @click.option("--envs", "env_counts", default="1,16,64,256,1024", show_default=True, help="Comma-separated E values.")
-@click.option("--steps", type=click.IntRange(min=1), default=2000, show_default=True, help="Timed updates per run.")
-@click.option("--warmup", type=click.IntRange(min=0), default=500, show_default=True)
+@click.option("--steps", type=click.IntRange(min=1), default=50_000, show_default=True,
+              help="Timed updates per run, from a reset (the original: mean over 50,000).")
+@click.option("--warmup", type=click.IntRange(min=0), default=100, show_default=True,
+              help="Untimed updates (compiles).")
 @click.option("--big/--no-big", default=True, show_default=True, help="Also one env on Borkenberge and a 1M-cell map.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None)
 @ARCH

@@ -163,7 +163,8 @@ def from_dict(cls: type, data: dict, where: str = "config", prefix: str = ""):
     hints = typing.get_type_hints(cls)
     for key in data:
         if key not in fields:
-            raise ConfigError(f"{where}: unknown key {prefix}{key!r}{_suggest(str(key), fields)}")
+            valid = [prefix + name for name in fields]
+            raise ConfigError(f"{where}: unknown key {prefix + str(key)!r}{_suggest(prefix + str(key), valid)}")
     kwargs = {}
     for name, value in data.items():
         hint = hints[name]

@@ -37,7 +37,7 @@ def build_sim(cfg: Config) -> FireSim:
 def record(sim: FireSim) -> dict:
     """One series record: the step and, per env, the counts of SERIES_KEYS."""
     stats = sim.stats()
-    step = int(sim.step_count.to_numpy()[0])
+    step = int(sim.steps_since_reset()[0])
     rec = {"step": step, "time_s": round(step * sim.dt, 6)}
     rec.update({k: stats[k].tolist() for k in SERIES_KEYS})
     return rec

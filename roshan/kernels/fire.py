@@ -34,10 +34,12 @@ FLAG_EXPOSED = 1  # the cell is in the exposed ("ticking") list
 FLAG_BURNED_DOWN = 2  # burned out completely once (a flood returns it to BURNED)
 NEVER = -1.0  # tau_ign of cells that cannot ignite (the reference skips their exposure)
 
-# Per-env counters (E, N_COUNTS): list lengths and statistics.
+# Per-env counters (E, N_COUNTS): list lengths, statistics and the update count since the last reset.
+# A row is padded to 16 ints = one 64-byte cache line, so threads stepping neighbouring envs do not write
+# to the same line (false sharing halved two-thread throughput below ~1000 envs).
 (N_BURNING, N_EXPOSED, N_FLOODED, N_CONV, N_RAD, N_BURNED, N_DROP_CONV, N_DROP_RAD, N_EXTINGUISHED,
- N_IGNITED_INIT, N_IGNITION_SHORT) = range(11)
-N_COUNTS = 11
+ N_IGNITED_INIT, N_IGNITION_SHORT, N_STEP) = range(12)
+N_COUNTS = 16
 STAT_NAMES = {
     "burning": N_BURNING,
     "burned": N_BURNED,
@@ -57,6 +59,24 @@ def default_capacities(num_cells: int) -> tuple[int, int]:
     The reference peaks (shared/reference) stay below 0.4 convection and 0.8 radiation particles per cell.
     """
     return max(1024, num_cells), max(2048, 2 * num_cells)
+
+
+def env_loop_padding(num_envs: int) -> int:
+    """How far apart env indices sit in the index space of the heavy per-env loops.
+
+    Taichi 1.7's CPU backend gives every task of a parallel range-for at least 512 iterations (adaptive block
+    size), so a loop over fewer than ~1024 envs runs on one thread. The env loops iterate over
+    ``num_envs * pad`` indices instead, and only every ``pad``-th does an env's work, so that even 2 envs
+    land in different tasks. Measured: two threads busy at every E instead of one below E = 1024.
+    """
+    from roshan.runtime import current_arch
+
+    if current_arch() not in (None, "cpu"):
+        return 1  # GPUs schedule one thread per iteration anyway
+    import taichi.lang.impl as impl
+
+    threads = max(1, impl.current_cfg().cpu_max_num_threads)
+    return max(1, -(-1024 * threads // num_envs))
 
 
 @ti.data_oriented
@@ -88,6 +108,7 @@ class FireSim:
         self.conv_capacity = fire.conv_capacity or auto_conv
         self.rad_capacity = fire.rad_capacity or auto_rad
         self._bake_constants()
+        self.env_pad = env_loop_padding(num_envs)
 
         E, N = num_envs, self.num_cells
         self.land = ti.field(ti.i32, N)
@@ -104,7 +125,6 @@ class FireSim:
         self.conv = ti.Vector.field(pt.CONV_FIELDS, ti.f32, (E, self.conv_capacity))
         self.rad = ti.Vector.field(pt.RAD_FIELDS, ti.f32, (E, self.rad_capacity))
         self.wind = ti.Vector.field(2, ti.f32, E)
-        self.step_count = ti.field(ti.i32, E)  # fire updates since the env's last reset
         self.episode = ti.field(ti.i32, E)  # resets so far
         self.env_key = ti.field(ti.u32, E)  # hash(seed, env, episode): the root of the env's streams
         self.gen_ctr = ti.field(ti.i32, E)  # draw counter of the serial initial-fire generator
@@ -215,6 +235,10 @@ class FireSim:
         return (np.column_stack([conv[:, pt.P_X1], conv[:, pt.P_X2], conv[:, pt.P_Y]]),
                 np.column_stack([rad_pos, rad[:, pt.R_Y]]))
 
+    def steps_since_reset(self) -> np.ndarray:
+        """(E,) fire updates each env has made since its last reset."""
+        return self.counts.to_numpy()[:, N_STEP].copy()
+
     def wind_vectors(self) -> np.ndarray:
         """(E, 2) wind velocity (m/s) along (rows, cols)."""
         return self.wind.to_numpy()
@@ -223,7 +247,7 @@ class FireSim:
         """Bytes of Taichi field memory one env holds (cells, lists, particle pools)."""
         per_cell = 4 * (CELL_FIELDS + 4) + 8 * TIMER_FIELDS
         return (self.num_cells * per_cell + 4 * (pt.CONV_FIELDS * self.conv_capacity
-                                                 + pt.RAD_FIELDS * self.rad_capacity) + 4 * (N_COUNTS + 16))
+                                                 + pt.RAD_FIELDS * self.rad_capacity) + 4 * (N_COUNTS + 8))
 
     # Test hooks: drive the cell state machine directly, without particles or the generator.
     def ignite_cells(self, mask) -> None:
@@ -257,14 +281,14 @@ class FireSim:
                 self.env_key[e] = rng.key(seed_key, e, self.episode[e])
                 for k in ti.static(range(N_COUNTS)):
                     self.counts[e, k] = 0
-                self.step_count[e] = 0
                 self.gen_ctr[e] = 0
                 self.wind[e] = self._draw_wind(e)
         for e, c in ti.ndrange(self.num_envs, self.num_cells):  # every cell of the reset envs, in parallel
             if mask[e] != 0:
                 self._reset_cell(e, c)
-        for e in range(self.num_envs):  # the generator is serial per env
-            if mask[e] != 0:
+        for v in range(self.num_envs * self.env_pad):  # the generator is serial per env
+            e = v // self.env_pad
+            if v % self.env_pad == 0 and mask[e] != 0:
                 light_initial_fires(self, e)
                 self.counts[e, N_IGNITED_INIT] = self.counts[e, N_BURNING]
 
@@ -295,15 +319,17 @@ class FireSim:
 
     @ti.kernel
     def _advance(self, n_steps: ti.i32):
-        for e in range(self.num_envs):
-            for _ in range(n_steps):
-                self._step_env(e)
+        for v in range(self.num_envs * self.env_pad):
+            if v % self.env_pad == 0:
+                e = v // self.env_pad
+                for _ in range(n_steps):
+                    self._step_env(e)
 
     @ti.func
     def _step_env(self, e):
         """One fire update in the reference's order (firespin.md 4); steps 2 and 4 share one pass."""
-        t = self.step_count[e] + 1
-        self.step_count[e] = t
+        t = self.counts[e, N_STEP] + 1
+        self.counts[e, N_STEP] = t
         step_key = rng.mix32(self.env_key[e] ^ (ti.cast(t, ti.u32) * ti.u32(0x9E3779B9)))
         self._move_convection(e, t, step_key)
         self._move_radiation(e, t, step_key)
@@ -485,7 +511,7 @@ class FireSim:
     def _flood(self, requests: ti.types.ndarray(dtype=ti.i32, ndim=2),
                extinguished: ti.types.ndarray(dtype=ti.i32, ndim=2)):
         for e in range(self.num_envs):  # requests of one env are applied in order
-            for m in range(requests.shape[1]):
+            for m in range(requests.shape[1]):  # (cheap per env: no padding, see env_pad)
                 c = requests[e, m]
                 extinguished[e, m] = 0
                 if 0 <= c < self.num_cells:
@@ -548,7 +574,7 @@ class FireSim:
         for e in range(self.num_envs):
             for c in range(self.num_cells):
                 if mask[e, c] != 0:
-                    self._visit(e, c, self.step_count[e] + 1)
+                    self._visit(e, c, self.counts[e, N_STEP] + 1)
 
 
 @ti.func

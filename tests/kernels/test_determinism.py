@@ -55,7 +55,7 @@ def test_reset_mask_resets_only_the_chosen_envs():
     ints_b, ints_a = before[0], after[0]
     assert np.array_equal(ints_b[0], ints_a[0]) and np.array_equal(ints_b[2], ints_a[2])
     assert not np.array_equal(ints_b[1], ints_a[1])
-    assert sim.step_count.to_numpy().tolist() == [1500, 0, 1500]
+    assert sim.steps_since_reset().tolist() == [1500, 0, 1500]
     assert sim.episode.to_numpy().tolist() == [0, 1, 0]
 
 
