@@ -97,6 +97,19 @@ class IgnitionConfig:
 
 
 @dataclass(frozen=True)
+class DroneConfig:
+    """FlyAgent drones (agents.md 1, 3, 4): physics, sensing and start layout."""
+
+    num_drones: int = num(4, 1, 64, doc="drones per env")
+    max_speed: float = num(10.0, 0.0, lo_open=True, doc="v_max per axis (m/s)")
+    view_range: int = num(10, 2, doc="view range (cells)")
+    drone_size: float = num(2.0, 0.0, lo_open=True, doc="drone radius used by the collision test (m)")
+    use_vel_bins: bool = True  # actions rounded to 41 levels (steps of 0.05)
+    use_velocity_change: bool = False  # acceleration mode: v += a * (v_max / 2) * dt
+    groundstation_start_percentage: float = num(1.0, 0.0, 1.0, doc="chance a drone starts at the groundstation")
+
+
+@dataclass(frozen=True)
 class MapConfig:
     """Which land-cover map to simulate."""
 
@@ -124,6 +137,7 @@ class Config:
     fire: FireConfig = field(default_factory=FireConfig)
     wind: WindConfig = field(default_factory=WindConfig)
     ignition: IgnitionConfig = field(default_factory=IgnitionConfig)
+    drones: DroneConfig = field(default_factory=DroneConfig)
     sim: SimConfig = field(default_factory=SimConfig)
 
 

@@ -1,0 +1,195 @@
+"""Drone physics on the fire simulator's envs (agents.md 3-4): motion, boundary, neighbours and collisions.
+
+Drones live on the second axis of every field, ``(E, N)``. Positions and velocities are in metres and m/s
+along (rows, cols); goals and neighbour offsets are in grid units (metres / cell size), as in the reference.
+The motion and sensing rules are ``ti.func``s taking one env, so the FlyAgent step kernel can run them
+serially per env inside the same launch as the fire update.
+"""
+
+import math
+
+import numpy as np
+import taichi as ti
+
+from roshan.config import DroneConfig
+from roshan.kernels import rng
+from roshan.kernels.fire import FireSim
+
+BIN = 0.05  # action resolution with use_vel_bins: 41 levels in [-1, 1]
+
+
+@ti.func
+def bin_action(a: ti.f32) -> ti.f32:
+    """round(a / 0.05) * 0.05 with halves away from zero (C++ std::round)."""
+    q = ti.abs(a) / BIN
+    return ti.math.sign(a) * ti.floor(q + 0.5) * BIN
+
+
+@ti.data_oriented
+class DroneSim:
+    """N drones in each of the fire simulator's E envs.
+
+    Args:
+        fire: the simulator whose envs, map size, cell size and seed the drones share.
+        cfg: drone physics and layout.
+    """
+
+    def __init__(self, fire: FireSim, cfg: DroneConfig | None = None):
+        self.fire = fire
+        self.cfg = cfg = cfg or DroneConfig()
+        E, N = fire.num_envs, cfg.num_drones
+        self.num_envs, self.num_drones = E, N
+        self.rows, self.cols, self.cell = fire.rows, fire.cols, fire.cell_size
+        self.dt = fire.dt
+        self.v_max = cfg.max_speed
+        self.accel = cfg.max_speed / 2.0  # a_max = v_max / 2 (m/s^2) in acceleration mode
+        self.use_bins = cfg.use_vel_bins
+        self.use_accel = cfg.use_velocity_change
+        self.view = float(cfg.view_range)
+        self.half_view = cfg.view_range / 2.0
+        self.s_norm = float(cfg.view_range // 2)  # own-feature normaliser floor(r_view / 2)
+        self.collide_sq = (2.0 * cfg.drone_size / self.cell) ** 2  # centres within 2 x size (grid units^2)
+        margin = max(0.05 * self.cell, 0.1)
+        self.ring = min(self.cell / 2.0 - margin, max(2.0 * cfg.drone_size, 0.35 * self.cell))
+        self.start_gs = cfg.groundstation_start_percentage
+
+        self.pos = ti.Vector.field(2, ti.f32, (E, N))
+        self.vel = ti.Vector.field(2, ti.f32, (E, N))
+        self.out_count = ti.field(ti.i32, (E, N))  # consecutive steps outside the grid
+        self.collided = ti.field(ti.i32, (E, N))  # sticky until reset
+        self.groundstation = ti.Vector.field(2, ti.i32, E)  # cell (row, col)
+        self.neighbours = ti.Vector.field(4, ti.f32, (E, N, N))  # slot 0: nearest boundary; then other drones
+        self.neighbour_mask = ti.field(ti.i32, (E, N, N))
+        self._all = np.ones(E, dtype=np.int32)
+
+    # ------------------------------------------------------------------------------------------ public API
+
+    def reset(self, mask=None) -> None:
+        """Place the groundstation and the drones of the masked envs (call after the fire's reset)."""
+        mask = self._all if mask is None else FireSim._int32(mask, (self.num_envs,), "reset mask")
+        self._reset(mask)
+
+    def move(self, actions) -> None:
+        """Apply (E, N, 2) float32 actions to every drone and refresh neighbours and collisions."""
+        self._move_all(actions)
+
+    def set_state(self, pos, vel) -> None:
+        """Place drones directly ((E, N, 2) metres and m/s) and refresh neighbours (tests, scripted scenes)."""
+        self.pos.from_numpy(np.ascontiguousarray(pos, dtype=np.float32))
+        self.vel.from_numpy(np.ascontiguousarray(vel, dtype=np.float32))
+        self._refresh_neighbours()
+
+    # ------------------------------------------------------------------------------------------ kernels
+
+    @ti.kernel
+    def _reset(self, mask: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+        for e in range(self.num_envs):
+            if mask[e] != 0:
+                self.place(e)
+                self.update_neighbours(e)
+
+    @ti.kernel
+    def _move_all(self, actions: ti.types.ndarray(dtype=ti.f32, ndim=3)):
+        for e in range(self.num_envs):
+            for d in range(self.num_drones):
+                self.move_drone(e, d, ti.Vector([actions[e, d, 0], actions[e, d, 1]]))
+            self.update_neighbours(e)
+
+    @ti.kernel
+    def _refresh_neighbours(self):
+        for e in range(self.num_envs):
+            self.update_neighbours(e)
+
+    # ------------------------------------------------------------------------------------------ rules
+
+    @ti.func
+    def place(self, e):
+        """Groundstation one cell inside a random corner; drones on a ring around their start cell."""
+        k = rng.key(self.fire.env_key[e], rng.DOMAIN_DRONES, 0)
+        gi = ti.select(rng.uniform(rng.key(k, 0, 0)) < 0.5, 1, self.rows - 2)  # row drawn first
+        gj = ti.select(rng.uniform(rng.key(k, 1, 0)) < 0.5, 1, self.cols - 2)
+        self.groundstation[e] = ti.Vector([gi, gj])
+        for d in range(self.num_drones):
+            ci = gi
+            cj = gj
+            if rng.uniform(rng.key(k, 2, d)) >= self.start_gs:
+                c = rng.uniform_int(rng.key(k, 3, d), self.rows * self.cols)
+                ci = c // self.cols
+                cj = c % self.cols
+            offset = ti.Vector([0.0, 0.0])
+            if ti.static(self.num_drones > 1):
+                theta = 2.0 * math.pi * d / self.num_drones
+                offset = self.ring * ti.Vector([ti.cos(theta), ti.sin(theta)])
+            self.pos[e, d] = (ti.Vector([ci, cj], ti.f32) + 0.5) * self.cell + offset
+            self.vel[e, d] = ti.Vector([0.0, 0.0])
+            self.out_count[e, d] = 0
+            self.collided[e, d] = 0
+
+    @ti.func
+    def move_drone(self, e, d, a):
+        """agents.md 3.1: bins, velocity or acceleration mode, per-axis clamp, integrate, out-of-area count."""
+        a = ti.math.clamp(a, -1.0, 1.0)
+        if ti.static(self.use_bins):
+            a = ti.Vector([bin_action(a[0]), bin_action(a[1])])
+        v = a * self.v_max
+        if ti.static(self.use_accel):
+            v = self.vel[e, d] + a * self.accel * self.dt
+        v = ti.math.clamp(v, -self.v_max, self.v_max)
+        p = self.pos[e, d] + v * self.dt
+        self.vel[e, d] = v
+        self.pos[e, d] = p
+        if self.is_outside(p):
+            self.out_count[e, d] += 1
+        else:
+            self.out_count[e, d] = 0
+
+    @ti.func
+    def is_outside(self, p) -> ti.i32:
+        i = ti.floor(p[0] / self.cell)
+        j = ti.floor(p[1] / self.cell)
+        return ti.cast(i < 0 or i >= self.rows or j < 0 or j >= self.cols, ti.i32)
+
+    @ti.func
+    def update_neighbours(self, e):
+        """agents.md 3.3: per drone, the nearest boundary and every other drone within half the view range."""
+        for i in range(self.num_drones):
+            x = self.pos[e, i] / self.cell
+            b = self.nearest_boundary(x)
+            if ti.abs(b[0]) <= self.half_view and ti.abs(b[1]) <= self.half_view:
+                self.neighbours[e, i, 0] = ti.Vector([b[0] / self.half_view, b[1] / self.half_view, 0.0, 0.0])
+                self.neighbour_mask[e, i, 0] = 1
+            else:
+                self.neighbours[e, i, 0] = ti.Vector([0.0, 0.0, 0.0, 0.0])
+                self.neighbour_mask[e, i, 0] = 0
+            slot = 1
+            for j in range(self.num_drones):
+                if j != i:
+                    dxy = self.pos[e, j] / self.cell - x
+                    if ti.abs(dxy[0]) < self.half_view and ti.abs(dxy[1]) < self.half_view:
+                        vn = self.vel[e, j] / (self.v_max * self.s_norm)
+                        self.neighbours[e, i, slot] = ti.Vector([dxy[0] / self.view, dxy[1] / self.view, vn[0], vn[1]])
+                        self.neighbour_mask[e, i, slot] = 1
+                        if dxy.dot(dxy) <= self.collide_sq:
+                            self.collided[e, i] = 1
+                            self.collided[e, j] = 1
+                    else:
+                        self.neighbours[e, i, slot] = ti.Vector([0.0, 0.0, 0.0, 0.0])
+                        self.neighbour_mask[e, i, slot] = 0
+                    slot += 1
+
+    @ti.func
+    def nearest_boundary(self, x):
+        """Displacement (grid units) to the nearest of the four map edges; ties keep the first in the order
+        row 0, row edge, column 0, column edge."""
+        best = ti.Vector([-x[0], 0.0])
+        for cand in ti.static(range(3)):
+            c = ti.Vector([0.0, 0.0])
+            if ti.static(cand == 0):
+                c = ti.Vector([self.rows - x[0], 0.0])
+            elif ti.static(cand == 1):
+                c = ti.Vector([0.0, -x[1]])
+            else:
+                c = ti.Vector([0.0, self.cols - x[1]])
+            if ti.abs(c[0]) + ti.abs(c[1]) < ti.abs(best[0]) + ti.abs(best[1]):
+                best = c
+        return best
