@@ -60,6 +60,12 @@ class DroneSim:
         self.groundstation = ti.Vector.field(2, ti.i32, E)  # cell (row, col)
         self.neighbours = ti.Vector.field(4, ti.f32, (E, N, N))  # slot 0: nearest boundary; then other drones
         self.neighbour_mask = ti.field(ti.i32, (E, N, N))
+        self.goal = ti.Vector.field(2, ti.f32, (E, N))  # grid units (a cell centre)
+        self.goal_cell = ti.field(ti.i32, (E, N))  # the burning cell this drone reserved, -1 for none
+        self.extinguished = ti.field(ti.i32, (E, N))  # extinguished_fire flag (agents.md 7.1)
+        self.n_extinguished = ti.field(ti.i32, (E, N))
+        self.objective = ti.field(ti.i32, (E, N))  # objective_reached
+        self.prev_dist = ti.field(ti.f32, (E, N))  # distance to the goal at the previous reward (grid units)
         self._all = np.ones(E, dtype=np.int32)
 
     # ------------------------------------------------------------------------------------------ public API
@@ -72,6 +78,10 @@ class DroneSim:
     def move(self, actions) -> None:
         """Apply (E, N, 2) float32 actions to every drone and refresh neighbours and collisions."""
         self._move_all(actions)
+
+    def assign_fire_goals(self) -> None:
+        """Give every drone, in index order, the nearest burning cell no other drone holds (tests, baselines)."""
+        self._assign_fire_goals()
 
     def set_state(self, pos, vel) -> None:
         """Place drones directly ((E, N, 2) metres and m/s) and refresh neighbours (tests, scripted scenes)."""
@@ -94,6 +104,12 @@ class DroneSim:
             for d in range(self.num_drones):
                 self.move_drone(e, d, ti.Vector([actions[e, d, 0], actions[e, d, 1]]))
             self.update_neighbours(e)
+
+    @ti.kernel
+    def _assign_fire_goals(self):
+        for e in range(self.num_envs):
+            for d in range(self.num_drones):
+                self.next_fire(e, d)
 
     @ti.kernel
     def _refresh_neighbours(self):
@@ -124,6 +140,10 @@ class DroneSim:
             self.vel[e, d] = ti.Vector([0.0, 0.0])
             self.out_count[e, d] = 0
             self.collided[e, d] = 0
+            self.goal_cell[e, d] = -1
+            self.extinguished[e, d] = 0
+            self.n_extinguished[e, d] = 0
+            self.objective[e, d] = 0
 
     @ti.func
     def move_drone(self, e, d, a):
@@ -193,3 +213,93 @@ class DroneSim:
             if ti.abs(c[0]) + ti.abs(c[1]) < ti.abs(best[0]) + ti.abs(best[1]):
                 best = c
         return best
+
+    # ------------------------------------------------------------------------------------------ goals
+
+    @ti.func
+    def groundstation_centre(self, e):
+        return ti.cast(self.groundstation[e], ti.f32) + 0.5
+
+    @ti.func
+    def cell_of(self, e, d) -> ti.i32:
+        """Flat index of the cell under drone d, or -1 outside the grid."""
+        c = -1
+        p = self.pos[e, d]
+        if self.is_outside(p) == 0:
+            c = ti.cast(ti.floor(p[0] / self.cell), ti.i32) * self.cols + ti.cast(ti.floor(p[1] / self.cell), ti.i32)
+        return c
+
+    @ti.func
+    def next_fire(self, e, d):
+        """agents.md 10.1: reserve the nearest burning cell no other drone holds; else the groundstation.
+
+        Distances are squared index distances from the drone's integer cell; the first of equals wins.
+        A reservation counts only while its cell burns, because candidates are burning cells.
+        """
+        p = self.pos[e, d] / self.cell
+        pi = ti.floor(p[0])
+        pj = ti.floor(p[1])
+        best = -1
+        best_d2 = 0.0
+        for k in range(self.fire.counts[e, 0]):  # N_BURNING
+            c = self.fire.burning[e, k]
+            free = 1
+            for other in range(self.num_drones):
+                if other != d and self.goal_cell[e, other] == c:
+                    free = 0
+            if free != 0:
+                di = ti.cast(c // self.cols, ti.f32) - pi
+                dj = ti.cast(c % self.cols, ti.f32) - pj
+                d2 = di * di + dj * dj
+                if best < 0 or d2 < best_d2:
+                    best = c
+                    best_d2 = d2
+        self.goal_cell[e, d] = best
+        goal = self.groundstation_centre(e)
+        if best >= 0:
+            goal = ti.Vector([ti.cast(best // self.cols, ti.f32), ti.cast(best % self.cols, ti.f32)]) + 0.5
+        self.goal[e, d] = goal
+
+    @ti.func
+    def random_corner_goal(self, e, d, h: ti.u32):
+        """A random one of the three non-groundstation corner cells (centre, grid units)."""
+        gs = self.groundstation[e]
+        pick = rng.uniform_int(h, 3)
+        n = 0
+        goal = self.groundstation_centre(e)
+        for corner in ti.static(range(4)):
+            ci = ti.static(1 if corner < 2 else -2)
+            cj = ti.static(1 if corner % 2 == 0 else -2)
+            cell = ti.Vector([ci if ci > 0 else self.rows + ci, cj if cj > 0 else self.cols + cj])
+            if cell[0] != gs[0] or cell[1] != gs[1]:
+                if n == pick:
+                    goal = ti.cast(cell, ti.f32) + 0.5
+                n += 1
+        self.goal_cell[e, d] = -1
+        self.goal[e, d] = goal
+
+    @ti.func
+    def distance_to_goal(self, e, d) -> ti.f32:
+        return (self.goal[e, d] - self.pos[e, d] / self.cell).norm()
+
+    @ti.func
+    def at_goal(self, e, d) -> ti.i32:
+        """Within 0.25 cells of the goal on both axes."""
+        g = self.goal[e, d] - self.pos[e, d] / self.cell
+        return ti.cast(ti.abs(g[0]) < 0.25 and ti.abs(g[1]) < 0.25, ti.i32)
+
+    @ti.func
+    def extinguish_here(self, e, d) -> ti.i32:
+        """agents.md 7.1: drop water on the cell under the drone if it burns. Returns 1 if that was the last
+        burning cell of the map (the drone reached the complex policy's objective)."""
+        c = self.cell_of(e, d)
+        last = 0
+        self.extinguished[e, d] = 0
+        if c >= 0:
+            if self.fire.is_burning(e, c) != 0:
+                self.fire.drop_water(e, c)
+                self.extinguished[e, d] = 1
+                self.n_extinguished[e, d] += 1
+                if self.fire.counts[e, 0] == 0:  # N_BURNING
+                    last = 1
+        return last

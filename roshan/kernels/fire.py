@@ -194,7 +194,12 @@ class FireSim:
         Redraws every cell's durations, clears particles and lists, draws the wind and lights the initial fires.
         """
         mask = self._all if mask is None else self._int32(mask, (self.num_envs,), "reset mask")
-        self._reset_envs(mask, rng.base_key(self.seed))
+        self._reset_envs(mask, self.seed_key)
+
+    @property
+    def seed_key(self) -> int:
+        """The root key of every random stream (a hash of the seed)."""
+        return rng.base_key(self.seed)
 
     def step(self, n: int = 1) -> None:
         """Advance every env by ``n`` fire updates (n * dt seconds) in one kernel launch."""
@@ -277,20 +282,50 @@ class FireSim:
     def _reset_envs(self, mask: ti.types.ndarray(dtype=ti.i32, ndim=1), seed_key: ti.u32):
         for e in range(self.num_envs):  # new episode: new key, counters, wind
             if mask[e] != 0:
-                self.episode[e] += 1
-                self.env_key[e] = rng.key(seed_key, e, self.episode[e])
-                for k in ti.static(range(N_COUNTS)):
-                    self.counts[e, k] = 0
-                self.gen_ctr[e] = 0
-                self.wind[e] = self._draw_wind(e)
+                self.begin_episode(e, seed_key)
         for e, c in ti.ndrange(self.num_envs, self.num_cells):  # every cell of the reset envs, in parallel
             if mask[e] != 0:
                 self._reset_cell(e, c)
         for v in range(self.num_envs * self.env_pad):  # the generator is serial per env
             e = v // self.env_pad
             if v % self.env_pad == 0 and mask[e] != 0:
-                light_initial_fires(self, e)
-                self.counts[e, N_IGNITED_INIT] = self.counts[e, N_BURNING]
+                self.light_fires(e)
+
+    @ti.func
+    def reset_env(self, e, seed_key: ti.u32):
+        """A whole reset of one env, serially: for same-step autoreset inside a batched step kernel."""
+        self.begin_episode(e, seed_key)
+        for c in range(self.num_cells):
+            self._reset_cell(e, c)
+        self.light_fires(e)
+
+    @ti.func
+    def begin_episode(self, e, seed_key: ti.u32):
+        self.episode[e] += 1
+        self.env_key[e] = rng.key(seed_key, e, self.episode[e])
+        for k in ti.static(range(N_COUNTS)):
+            self.counts[e, k] = 0
+        self.gen_ctr[e] = 0
+        self.wind[e] = self._draw_wind(e)
+
+    @ti.func
+    def light_fires(self, e):
+        light_initial_fires(self, e)
+        self.counts[e, N_IGNITED_INIT] = self.counts[e, N_BURNING]
+
+    @ti.func
+    def step_env(self, e):
+        """One fire update of env e (for kernels that fuse the fire with other work)."""
+        self._step_env(e)
+
+    @ti.func
+    def drop_water(self, e, c) -> ti.i32:
+        """Flood cell c of env e (firespin.md 8); 1 if it was burning."""
+        return self._drop_water(e, c)
+
+    @ti.func
+    def is_burning(self, e, c) -> ti.i32:
+        return ti.cast(self.cells[e, c][C_STATE] == BURNING, ti.i32)
 
     @ti.func
     def _draw_wind(self, e):

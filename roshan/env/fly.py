@@ -1,0 +1,315 @@
+"""FlyAgent vector environment: E fire maps with N drones each, stepped by one kernel launch.
+
+One step of env e (agents.md 2), serially inside the launch: the fire update; then every drone moves, handles
+its goal (complex policy: extinguish and take the nearest unreserved fire; simple: reaching the goal is the
+objective), is checked for termination and rewarded; then neighbours and collisions are recomputed and a
+frame is pushed. An env whose episode ended copies its observation to ``final_obs`` and is reset in the same
+launch (Gymnasium's same-step autoreset).
+"""
+
+import math
+from dataclasses import dataclass, field
+
+import gymnasium as gym
+import numpy as np
+import taichi as ti
+import torch
+from gymnasium.vector import AutoresetMode
+
+from roshan.config import Config, DroneConfig, choice, num
+from roshan.env.rewards import RewardCoefficients, RewardConfig, fly_reward, proximity_sum
+from roshan.kernels import observe, rng
+from roshan.kernels.drones import DroneSim
+from roshan.kernels.fire import N_BURNED, N_BURNING, N_CONV, N_EXTINGUISHED, N_RAD, FireSim
+from roshan.maps import load_map
+from roshan.runtime import ensure_taichi, torch_device
+
+REASONS = ("none", "timeout", "boundary", "burnout", "collision")
+TIMEOUT, BOUNDARY, COLLISION = 1, 2, 4
+# Columns of the per-env episode record, valid where the episode ended this step.
+EP_SUCCESS, EP_REASON, EP_STEPS, EP_BURNED, EP_EXTINGUISHED, EP_RETURN = range(6)
+EPISODE_FIELDS = ("success", "reason", "steps", "burned_fraction", "extinguished", "return")
+
+
+@dataclass(frozen=True)
+class FlyConfig:
+    """The FlyAgent task (agents.md 5-9)."""
+
+    policy: str = choice("simple", ("simple", "complex"))  # simple: reach the goal; complex: put every fire out
+    collision: bool = False  # collisions terminate (and the collision reward terms apply)
+    time_limit: str = choice("newest", ("newest", "thesis"))  # T_max formulas of agents.md 5
+    k_turn: float = num(1.5, 0.0, lo_open=True, doc="detour factor of T_phys")
+    fire_goal_percentage: float = num(1.0, 0.0, 1.0, doc="chance an initial goal is a fire (else a corner)")
+    frames: int = num(3, 1, 8, doc="stacked observation frames (index 0 = newest)")
+    sticky_extinguish: bool = False  # True reproduces the original's sticky Extinguish reward flag (agents.md 7.1)
+    rewards: RewardConfig = field(default_factory=RewardConfig)
+
+
+def time_limit(rows: int, cols: int, cell: float, dt: float, v_max: float, fire_percentage: float,
+               cfg: FlyConfig) -> int:
+    """T_max of agents.md 5 for a FlyAgent run (newest: ceil(4 T_phys); thesis-era: 2 T_phys, complex x beta1)."""
+    diag = cell * math.sqrt(rows**2 + cols**2)
+    t_phys = math.ceil(diag / v_max * cfg.k_turn / dt)
+    if cfg.time_limit == "newest":
+        return math.ceil(4 * t_phys)
+    limit = math.ceil(2 * t_phys)
+    if cfg.policy == "complex":
+        area = rows * cols
+        fires = math.ceil(float(np.float32(fire_percentage)) * area)
+        limit *= math.ceil(0.32 * math.sqrt(area) * math.sqrt(fires) / v_max)
+    return limit
+
+
+@ti.data_oriented
+class FlyKernels:
+    """The fused reset and step kernels over a FireSim and a DroneSim."""
+
+    def __init__(self, fire: FireSim, drones: DroneSim, cfg: FlyConfig, t_max: int):
+        self.fire, self.drones, self.cfg = fire, drones, cfg
+        self.coef = RewardCoefficients.resolve(cfg.rewards, cfg.policy == "complex", cfg.collision)
+        self.is_complex = cfg.policy == "complex"
+        self.collision_on = cfg.collision
+        self.sticky = cfg.sticky_extinguish
+        self.frames = cfg.frames
+        self.t_max = t_max
+        self.goal_fire_p = cfg.fire_goal_percentage
+        E = fire.num_envs
+        self.remaining = ti.field(ti.i32, E)
+        self.steps = ti.field(ti.i32, E)
+        self.ret = ti.field(ti.f32, E)
+
+    @ti.kernel
+    def reset_all(self, obs: ti.types.ndarray(dtype=ti.f32, ndim=4), seed_key: ti.u32):
+        for e in range(self.fire.num_envs):
+            self.new_episode(obs, e, seed_key)
+
+    @ti.kernel
+    def step(self, actions: ti.types.ndarray(dtype=ti.f32, ndim=3), obs: ti.types.ndarray(dtype=ti.f32, ndim=4),
+             final_obs: ti.types.ndarray(dtype=ti.f32, ndim=4), rewards: ti.types.ndarray(dtype=ti.f32, ndim=2),
+             dones: ti.types.ndarray(dtype=ti.u8, ndim=2), episode: ti.types.ndarray(dtype=ti.f32, ndim=2),
+             seed_key: ti.u32):
+        for v in range(self.fire.num_envs * self.fire.env_pad):
+            if v % self.fire.env_pad == 0:
+                e = v // self.fire.env_pad
+                self.step_env(actions, obs, final_obs, rewards, dones, episode, e, seed_key)
+
+    @ti.func
+    def new_episode(self, obs: ti.template(), e, seed_key: ti.u32):
+        """Reset env e: fire, drones, initial goals, step limit, and a full frame stack."""
+        dr = self.drones
+        self.fire.reset_env(e, seed_key)
+        dr.place(e)
+        k = rng.key(self.fire.env_key[e], rng.DOMAIN_DRONES, 1)
+        for d in range(dr.num_drones):
+            if rng.uniform(rng.key(k, d, 0)) < self.goal_fire_p:
+                dr.next_fire(e, d)
+            else:
+                dr.random_corner_goal(e, d, rng.key(k, d, 1))
+            dr.prev_dist[e, d] = dr.distance_to_goal(e, d)
+        dr.update_neighbours(e)
+        for d in range(dr.num_drones):
+            observe.fill_frames(obs, dr, e, d, self.frames)
+        self.remaining[e] = self.t_max
+        self.steps[e] = 0
+        self.ret[e] = 0.0
+
+    @ti.func
+    def step_env(self, actions: ti.template(), obs: ti.template(), final_obs: ti.template(), rewards: ti.template(),
+                 dones: ti.template(), episode: ti.template(), e, seed_key: ti.u32):
+        dr = self.drones
+        self.fire.step_env(e)
+        self.remaining[e] -= 1
+        self.steps[e] += 1
+        timed_out = self.remaining[e] <= 0
+        goal_flag = 0  # set by the drone that put out the last fire; pays it and the drones after it
+        any_terminal = 0
+        any_failed = 0
+        last_reason = 0
+        reward_sum = 0.0
+        for d in range(dr.num_drones):
+            dr.move_drone(e, d, ti.Vector([actions[e, d, 0], actions[e, d, 1]]))
+            if ti.static(not self.sticky):
+                dr.extinguished[e, d] = 0  # the fix: Extinguish pays on the step water hits a fire only
+            if dr.at_goal(e, d) != 0:
+                if ti.static(self.is_complex):
+                    if dr.extinguish_here(e, d) != 0:
+                        dr.objective[e, d] = 1
+                        goal_flag = 1
+                    dr.goal_cell[e, d] = -1
+                    dr.next_fire(e, d)
+                else:
+                    dr.objective[e, d] = 1
+            reason = 0
+            if dr.out_count[e, d] > 1:
+                reason = BOUNDARY
+            if ti.static(self.collision_on):
+                if dr.collided[e, d] != 0:
+                    reason = COLLISION
+            if timed_out:
+                reason = TIMEOUT
+            success = dr.objective[e, d]
+            if ti.static(self.is_complex):
+                if self.fire.counts[e, N_BURNING] == 0 and self.fire.counts[e, N_CONV] + self.fire.counts[
+                        e, N_RAD] == 0:
+                    success = 1
+            terminal = reason != 0 or success != 0
+            if terminal:
+                any_terminal = 1
+                if reason != 0:
+                    any_failed = 1
+                    last_reason = reason
+            dist = dr.distance_to_goal(e, d)
+            progress = dr.prev_dist[e, d] - dist
+            dr.prev_dist[e, d] = dist
+            prox = 0.0
+            for j in range(dr.num_drones):  # the previous frame's neighbour list (before this step's refresh)
+                prox += proximity_sum(dr.neighbours[e, d, j])
+            r = fly_reward(self.coef, ti.cast(dr.objective[e, d] != 0 or goal_flag != 0, ti.i32),
+                           ti.cast(terminal and dr.is_outside(dr.pos[e, d]) != 0, ti.i32),
+                           ti.cast(terminal and timed_out, ti.i32), dr.extinguished[e, d],
+                           dr.collided[e, d], progress, prox)
+            rewards[e, d] = r
+            reward_sum += r
+        dr.update_neighbours(e)
+        for d in range(dr.num_drones):
+            observe.push_frame(obs, dr, e, d, self.frames)
+        self.ret[e] += reward_sum / dr.num_drones
+        dones[e, 0] = ti.u8(0)
+        dones[e, 1] = ti.u8(0)
+        if any_terminal != 0:
+            dones[e, 1] = ti.cast(timed_out, ti.u8)
+            dones[e, 0] = ti.cast(not timed_out, ti.u8)
+            self.record_episode(episode, e, 1 - any_failed, last_reason)
+            for d, t, k in ti.ndrange(dr.num_drones, self.frames, obs.shape[3]):
+                final_obs[e, d, t, k] = obs[e, d, t, k]
+            self.new_episode(obs, e, seed_key)
+
+    @ti.func
+    def record_episode(self, episode: ti.template(), e, success, reason):
+        episode[e, EP_SUCCESS] = ti.cast(success, ti.f32)
+        episode[e, EP_REASON] = ti.cast(reason, ti.f32)
+        episode[e, EP_STEPS] = ti.cast(self.steps[e], ti.f32)
+        episode[e, EP_BURNED] = ti.cast(self.fire.counts[e, N_BURNED], ti.f32) / self.fire.num_cells
+        episode[e, EP_EXTINGUISHED] = ti.cast(self.fire.counts[e, N_EXTINGUISHED], ti.f32)
+        episode[e, EP_RETURN] = self.ret[e]
+
+
+class FlyVectorEnv(gym.vector.VectorEnv):
+    """E FlyAgent environments as one Gymnasium vector env whose tensors are shared with torch.
+
+    Observations are a dict of torch views into one buffer: ``agent`` (E, N, T, 9), ``neighbors``
+    (E, N, T, N, 4) and ``neighbors_mask`` (E, N, T, N) (1.0 = valid slot). Rewards are (E, N) per drone;
+    terminations and truncations (E,) (a timeout truncates). The same tensor objects are returned by every
+    call. Actions (E, N, 2) in [-1, 1] (torch or numpy; values outside are clipped, NaN/inf raise).
+
+    ``info`` holds ``final_obs`` (the observation of envs that ended this step, same layout), ``episode``
+    (a dict of (E,) tensors: success, reason index into :data:`REASONS`, steps, burned_fraction, extinguished,
+    return) and ``_episode`` (the (E,) bool mask of envs whose episode ended).
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": ["rgb_array"]}
+
+    def __init__(self, num_envs: int = 1, config: Config | None = None, fly: FlyConfig | None = None,
+                 render_mode: str | None = None, seed: int | None = None):
+        ensure_taichi()
+        cfg = config or Config()
+        self.config, self.fly_config = cfg, fly or FlyConfig()
+        self.render_mode = render_mode
+        land = load_map(cfg.map.name, band=cfg.map.band or None, rows=cfg.map.uniform_rows,
+                        cols=cfg.map.uniform_cols)
+        self.fire = FireSim(land, cfg.fire, cfg.wind, cfg.ignition, num_envs=num_envs,
+                            seed=cfg.sim.seed if seed is None else seed)
+        self.drones = DroneSim(self.fire, cfg.drones)
+        self.t_max = time_limit(land.rows, land.cols, land.cell_size, cfg.fire.dt, cfg.drones.max_speed,
+                                cfg.ignition.fire_percentage, self.fly_config)
+        self.kernels = FlyKernels(self.fire, self.drones, self.fly_config, self.t_max)
+        self.num_envs = num_envs
+        self.num_drones = n = cfg.drones.num_drones
+        frames = self.fly_config.frames
+        self.device = torch.device(torch_device())
+        self._define_spaces(num_envs, n, frames)
+        width = observe.frame_width(n)
+        dev = self.device
+        self._obs_buf = torch.zeros((num_envs, n, frames, width), dtype=torch.float32, device=dev)
+        self._final_buf = torch.zeros_like(self._obs_buf)
+        self._rewards = torch.zeros((num_envs, n), dtype=torch.float32, device=dev)
+        self._dones = torch.zeros((num_envs, 2), dtype=torch.uint8, device=dev)
+        self._episode = torch.zeros((num_envs, len(EPISODE_FIELDS)), dtype=torch.float32, device=dev)
+        self._obs = self._views(self._obs_buf)
+        done_bool = self._dones.view(torch.bool)
+        self.terminations, self.truncations = done_bool[:, 0], done_bool[:, 1]
+        self._info = {"final_obs": self._views(self._final_buf),
+                      "episode": {k: self._episode[:, i] for i, k in enumerate(EPISODE_FIELDS)}}
+        self._renderer = None
+
+    def _define_spaces(self, num_envs: int, n: int, frames: int) -> None:
+        box = gym.spaces.Box
+        self.single_observation_space = gym.spaces.Dict({
+            "agent": box(-np.inf, np.inf, (n, frames, observe.OWN_FEATURES), np.float32),
+            "neighbors": box(-np.inf, np.inf, (n, frames, n, 4), np.float32),
+            "neighbors_mask": box(0.0, 1.0, (n, frames, n), np.float32),
+        })
+        self.single_action_space = box(-1.0, 1.0, (n, 2), np.float32)
+        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, num_envs)
+        self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)
+
+    def _views(self, buf: torch.Tensor) -> dict[str, torch.Tensor]:
+        n, k = self.num_drones, observe.OWN_FEATURES
+        e, _, t, _ = buf.shape
+        return {"agent": buf[..., :k], "neighbors": buf[..., k:k + 4 * n].unflatten(-1, (n, 4)),
+                "neighbors_mask": buf[..., k + 4 * n:]}
+
+    # ------------------------------------------------------------------------------------------ gymnasium
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Start new episodes in every env; ``seed`` restarts every random stream from that seed."""
+        super().reset(seed=seed)
+        if seed is not None:
+            self.fire.seed = int(seed)
+            self.fire.episode.fill(-1)
+        self.kernels.reset_all(self._obs_buf, self.fire.seed_key)
+        self._episode.zero_()
+        self._dones.zero_()
+        return self._obs, {}
+
+    def step(self, actions):
+        """Advance every env by one FlyAgent step; envs that end are reset in the same call."""
+        a = self._check_actions(actions)
+        self.kernels.step(a, self._obs_buf, self._final_buf, self._rewards, self._dones, self._episode,
+                          self.fire.seed_key)
+        info = dict(self._info)
+        info["_episode"] = self.terminations | self.truncations
+        info["_final_obs"] = info["_episode"]
+        return self._obs, self._rewards, self.terminations, self.truncations, info
+
+    def _check_actions(self, actions) -> torch.Tensor:
+        want = (self.num_envs, self.num_drones, 2)
+        if isinstance(actions, np.ndarray):
+            actions = torch.from_numpy(actions)
+        elif not isinstance(actions, torch.Tensor):
+            actions = torch.as_tensor(np.asarray(actions))
+        if tuple(actions.shape) != want:
+            raise ValueError(f"actions: expected shape {want} (envs, drones, 2), got {tuple(actions.shape)}")
+        a = actions.to(device=self.device, dtype=torch.float32).contiguous()
+        finite = torch.isfinite(a)
+        if not bool(finite.all()):
+            e, d, _ = (~finite).nonzero()[0].tolist()
+            raise ValueError(f"actions: non-finite value {a[e, d].tolist()} for env {e}, drone {d}")
+        return a
+
+    def render(self):
+        """An RGB frame (H, W, 3) uint8 of env 0 (fire, particles; drones are drawn by later overlays)."""
+        from roshan.kernels.render import FrameRenderer
+
+        if self._renderer is None:
+            self._renderer = FrameRenderer(self.fire, backend="raster")
+        return self._renderer.render()
+
+    def close(self, **kwargs):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    @property
+    def drone_config(self) -> DroneConfig:
+        return self.config.drones
