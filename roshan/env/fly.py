@@ -3,8 +3,10 @@
 One step of env e (agents.md 2), serially inside the launch: the fire update; then every drone moves, handles
 its goal (complex policy: extinguish and take the nearest unreserved fire; simple: reaching the goal is the
 objective), is checked for termination and rewarded; then neighbours and collisions are recomputed and a
-frame is pushed. An env whose episode ended copies its observation to ``final_obs`` and is reset in the same
-launch (Gymnasium's same-step autoreset).
+frame is pushed. A second launch copies the observation of every env whose episode ended to ``final_obs``
+and resets it (Gymnasium's same-step autoreset). Resetting in its own kernel, shared with ``reset()``,
+compiles the reset code once instead of inlining it into the step kernel too (a fresh machine compiled the
+fused version for ~25 s).
 """
 
 import math
@@ -74,24 +76,35 @@ class FlyKernels:
         self.t_max = t_max
         self.goal_fire_p = cfg.fire_goal_percentage
         E = fire.num_envs
+        self.ended = ti.field(ti.i32, E)  # the episode ended in this step: restart() resets the env
         self.remaining = ti.field(ti.i32, E)
         self.steps = ti.field(ti.i32, E)
         self.ret = ti.field(ti.f32, E)
 
+    def reset_all(self, obs, final_obs, seed_key: int) -> None:
+        self.ended.fill(1)
+        self.restart(obs, final_obs, seed_key, 0)
+
     @ti.kernel
-    def reset_all(self, obs: ti.types.ndarray(dtype=ti.f32, ndim=4), seed_key: ti.u32):
-        for e in range(self.fire.num_envs):
-            self.new_episode(obs, e, seed_key)
+    def restart(self, obs: ti.types.ndarray(dtype=ti.f32, ndim=4), final_obs: ti.types.ndarray(dtype=ti.f32, ndim=4),
+                seed_key: ti.u32, keep_final: ti.i32):
+        """Reset the envs flagged in ``ended``, first copying their observation to ``final_obs``."""
+        for v in range(self.fire.num_envs * self.fire.env_pad):
+            e = v // self.fire.env_pad
+            if v % self.fire.env_pad == 0 and self.ended[e] != 0:
+                if keep_final != 0:
+                    for d, t, k in ti.ndrange(self.drones.num_drones, self.frames, obs.shape[3]):
+                        final_obs[e, d, t, k] = obs[e, d, t, k]
+                self.new_episode(obs, e, seed_key)
+                self.ended[e] = 0
 
     @ti.kernel
     def step(self, actions: ti.types.ndarray(dtype=ti.f32, ndim=3), obs: ti.types.ndarray(dtype=ti.f32, ndim=4),
-             final_obs: ti.types.ndarray(dtype=ti.f32, ndim=4), rewards: ti.types.ndarray(dtype=ti.f32, ndim=2),
-             dones: ti.types.ndarray(dtype=ti.u8, ndim=2), episode: ti.types.ndarray(dtype=ti.f32, ndim=2),
-             seed_key: ti.u32):
+             rewards: ti.types.ndarray(dtype=ti.f32, ndim=2), dones: ti.types.ndarray(dtype=ti.u8, ndim=2),
+             episode: ti.types.ndarray(dtype=ti.f32, ndim=2)):
         for v in range(self.fire.num_envs * self.fire.env_pad):
             if v % self.fire.env_pad == 0:
-                e = v // self.fire.env_pad
-                self.step_env(actions, obs, final_obs, rewards, dones, episode, e, seed_key)
+                self.step_env(actions, obs, rewards, dones, episode, v // self.fire.env_pad)
 
     @ti.func
     def new_episode(self, obs: ti.template(), e, seed_key: ti.u32):
@@ -114,8 +127,8 @@ class FlyKernels:
         self.ret[e] = 0.0
 
     @ti.func
-    def step_env(self, actions: ti.template(), obs: ti.template(), final_obs: ti.template(), rewards: ti.template(),
-                 dones: ti.template(), episode: ti.template(), e, seed_key: ti.u32):
+    def step_env(self, actions: ti.template(), obs: ti.template(), rewards: ti.template(), dones: ti.template(),
+                 episode: ti.template(), e):
         dr = self.drones
         self.fire.step_env(e)
         self.remaining[e] -= 1
@@ -164,10 +177,12 @@ class FlyKernels:
             prox = 0.0
             for j in range(dr.num_drones):  # the previous frame's neighbour list (before this step's refresh)
                 prox += proximity_sum(dr.neighbours[e, d, j])
-            r = fly_reward(self.coef, ti.cast(dr.objective[e, d] != 0 or goal_flag != 0, ti.i32),
-                           ti.cast(terminal and dr.is_outside(dr.pos[e, d]) != 0, ti.i32),
-                           ti.cast(terminal and timed_out, ti.i32), dr.extinguished[e, d],
-                           dr.collided[e, d], progress, prox)
+            reached = ti.cast(dr.objective[e, d] != 0 or goal_flag != 0, ti.i32)
+            left_map = ti.cast(terminal and dr.is_outside(dr.pos[e, d]) != 0, ti.i32)
+            out_of_time = ti.cast(terminal and timed_out, ti.i32)
+            extinguished = dr.extinguished[e, d]
+            collided = dr.collided[e, d]
+            r = fly_reward(self.coef, reached, left_map, out_of_time, extinguished, collided, progress, prox)
             rewards[e, d] = r
             reward_sum += r
         dr.update_neighbours(e)
@@ -180,9 +195,7 @@ class FlyKernels:
             dones[e, 1] = ti.cast(timed_out, ti.u8)
             dones[e, 0] = ti.cast(not timed_out, ti.u8)
             self.record_episode(episode, e, 1 - any_failed, last_reason)
-            for d, t, k in ti.ndrange(dr.num_drones, self.frames, obs.shape[3]):
-                final_obs[e, d, t, k] = obs[e, d, t, k]
-            self.new_episode(obs, e, seed_key)
+            self.ended[e] = 1
 
     @ti.func
     def record_episode(self, episode: ti.template(), e, success, reason):
@@ -267,7 +280,7 @@ class FlyVectorEnv(gym.vector.VectorEnv):
         if seed is not None:
             self.fire.seed = int(seed)
             self.fire.episode.fill(-1)
-        self.kernels.reset_all(self._obs_buf, self.fire.seed_key)
+        self.kernels.reset_all(self._obs_buf, self._final_buf, self.fire.seed_key)
         self._episode.zero_()
         self._dones.zero_()
         return self._obs, {}
@@ -275,8 +288,9 @@ class FlyVectorEnv(gym.vector.VectorEnv):
     def step(self, actions):
         """Advance every env by one FlyAgent step; envs that end are reset in the same call."""
         a = self._check_actions(actions)
-        self.kernels.step(a, self._obs_buf, self._final_buf, self._rewards, self._dones, self._episode,
-                          self.fire.seed_key)
+        k = self.kernels
+        k.step(a, self._obs_buf, self._rewards, self._dones, self._episode)
+        k.restart(self._obs_buf, self._final_buf, self.fire.seed_key, 1)
         info = dict(self._info)
         info["_episode"] = self.terminations | self.truncations
         info["_final_obs"] = info["_episode"]

@@ -83,6 +83,11 @@ class DroneSim:
         """Give every drone, in index order, the nearest burning cell no other drone holds (tests, baselines)."""
         self._assign_fire_goals()
 
+    def set_goals(self, goals) -> None:
+        """Set goals ((E, N, 2) grid units; no reservation) and restart the progress reference distance."""
+        self.goal.from_numpy(np.ascontiguousarray(goals, dtype=np.float32))
+        self._restart_progress()
+
     def set_state(self, pos, vel) -> None:
         """Place drones directly ((E, N, 2) metres and m/s) and refresh neighbours (tests, scripted scenes)."""
         self.pos.from_numpy(np.ascontiguousarray(pos, dtype=np.float32))
@@ -110,6 +115,12 @@ class DroneSim:
         for e in range(self.num_envs):
             for d in range(self.num_drones):
                 self.next_fire(e, d)
+
+    @ti.kernel
+    def _restart_progress(self):
+        for e, d in ti.ndrange(self.num_envs, self.num_drones):
+            self.goal_cell[e, d] = -1
+            self.prev_dist[e, d] = self.distance_to_goal(e, d)
 
     @ti.kernel
     def _refresh_neighbours(self):
