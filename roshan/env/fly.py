@@ -133,7 +133,7 @@ class FlyKernels:
         self.fire.step_env(e)
         self.remaining[e] -= 1
         self.steps[e] += 1
-        timed_out = self.remaining[e] <= 0
+        timed_out = ti.cast(self.remaining[e] <= 0, ti.i32)
         goal_flag = 0  # set by the drone that put out the last fire; pays it and the drones after it
         any_terminal = 0
         any_failed = 0
@@ -141,48 +141,15 @@ class FlyKernels:
         reward_sum = 0.0
         for d in range(dr.num_drones):
             dr.move_drone(e, d, ti.Vector([actions[e, d, 0], actions[e, d, 1]]))
-            if ti.static(not self.sticky):
-                dr.extinguished[e, d] = 0  # the fix: Extinguish pays on the step water hits a fire only
-            if dr.at_goal(e, d) != 0:
-                if ti.static(self.is_complex):
-                    if dr.extinguish_here(e, d) != 0:
-                        dr.objective[e, d] = 1
-                        goal_flag = 1
-                    dr.goal_cell[e, d] = -1
-                    dr.next_fire(e, d)
-                else:
-                    dr.objective[e, d] = 1
-            reason = 0
-            if dr.out_count[e, d] > 1:
-                reason = BOUNDARY
-            if ti.static(self.collision_on):
-                if dr.collided[e, d] != 0:
-                    reason = COLLISION
-            if timed_out:
-                reason = TIMEOUT
-            success = dr.objective[e, d]
-            if ti.static(self.is_complex):
-                if self.fire.counts[e, N_BURNING] == 0 and self.fire.counts[e, N_CONV] + self.fire.counts[
-                        e, N_RAD] == 0:
-                    success = 1
-            terminal = reason != 0 or success != 0
-            if terminal:
+            goal_flag |= self.handle_goal(e, d)
+            reason = self.failure_reason(e, d, timed_out)
+            terminal = ti.cast(reason != 0 or self.has_succeeded(e, d) != 0, ti.i32)
+            if terminal != 0:
                 any_terminal = 1
                 if reason != 0:
                     any_failed = 1
                     last_reason = reason
-            dist = dr.distance_to_goal(e, d)
-            progress = dr.prev_dist[e, d] - dist
-            dr.prev_dist[e, d] = dist
-            prox = 0.0
-            for j in range(dr.num_drones):  # the previous frame's neighbour list (before this step's refresh)
-                prox += proximity_sum(dr.neighbours[e, d, j])
-            reached = ti.cast(dr.objective[e, d] != 0 or goal_flag != 0, ti.i32)
-            left_map = ti.cast(terminal and dr.is_outside(dr.pos[e, d]) != 0, ti.i32)
-            out_of_time = ti.cast(terminal and timed_out, ti.i32)
-            extinguished = dr.extinguished[e, d]
-            collided = dr.collided[e, d]
-            r = fly_reward(self.coef, reached, left_map, out_of_time, extinguished, collided, progress, prox)
+            r = self.reward(e, d, goal_flag, terminal, timed_out)
             rewards[e, d] = r
             reward_sum += r
         dr.update_neighbours(e)
@@ -193,9 +160,67 @@ class FlyKernels:
         dones[e, 1] = ti.u8(0)
         if any_terminal != 0:
             dones[e, 1] = ti.cast(timed_out, ti.u8)
-            dones[e, 0] = ti.cast(not timed_out, ti.u8)
+            dones[e, 0] = ti.cast(1 - timed_out, ti.u8)
             self.record_episode(episode, e, 1 - any_failed, last_reason)
             self.ended[e] = 1
+
+    @ti.func
+    def handle_goal(self, e, d) -> ti.i32:
+        """agents.md 7: at its goal a complex-policy drone extinguishes and takes the next fire; a simple-policy
+        drone has reached its objective. Returns 1 if this drone put out the map's last fire."""
+        dr = self.drones
+        if ti.static(not self.sticky):
+            dr.extinguished[e, d] = 0  # the fix: Extinguish pays on the step water hits a fire only
+        last = 0
+        if dr.at_goal(e, d) != 0:
+            if ti.static(self.is_complex):
+                if dr.extinguish_here(e, d) != 0:
+                    dr.objective[e, d] = 1
+                    last = 1
+                dr.goal_cell[e, d] = -1
+                dr.next_fire(e, d)
+            else:
+                dr.objective[e, d] = 1
+        return last
+
+    @ti.func
+    def failure_reason(self, e, d, timed_out) -> ti.i32:
+        """agents.md 9: later rules overwrite earlier ones (timeout > collision > boundary)."""
+        reason = 0
+        if self.drones.out_count[e, d] > 1:
+            reason = BOUNDARY
+        if ti.static(self.collision_on):
+            if self.drones.collided[e, d] != 0:
+                reason = COLLISION
+        if timed_out != 0:
+            reason = TIMEOUT
+        return reason
+
+    @ti.func
+    def has_succeeded(self, e, d) -> ti.i32:
+        """Simple: reached the goal. Complex: put out the last fire, or nothing burns and no particle lives."""
+        success = self.drones.objective[e, d]
+        if ti.static(self.is_complex):
+            fc = ti.static(self.fire.counts)
+            if fc[e, N_BURNING] == 0 and fc[e, N_CONV] + fc[e, N_RAD] == 0:
+                success = 1
+        return success
+
+    @ti.func
+    def reward(self, e, d, goal_flag, terminal, timed_out) -> ti.f32:
+        """agents.md 8.1 for drone d, with the neighbour list of the previous step (proximity)."""
+        dr = self.drones
+        dist = dr.distance_to_goal(e, d)
+        progress = dr.prev_dist[e, d] - dist
+        dr.prev_dist[e, d] = dist
+        prox = 0.0
+        for j in range(dr.num_drones):
+            prox += proximity_sum(dr.neighbours[e, d, j])
+        reached = ti.cast(dr.objective[e, d] != 0 or goal_flag != 0, ti.i32)
+        left_map = ti.cast(terminal != 0 and dr.is_outside(dr.pos[e, d]) != 0, ti.i32)
+        out_of_time = ti.cast(terminal != 0 and timed_out != 0, ti.i32)
+        return fly_reward(self.coef, reached, left_map, out_of_time, dr.extinguished[e, d], dr.collided[e, d],
+                          progress, prox)
 
     @ti.func
     def record_episode(self, episode: ti.template(), e, success, reason):
