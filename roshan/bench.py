@@ -259,3 +259,70 @@ def plot_fidelity(results: dict, path: Path) -> Path:
     fig.savefig(path, dpi=80)
     plt.close(fig)
     return path
+
+
+# ---------------------------------------------------------------------------------------------- FlyAgent env
+
+ORIGINAL_FLY_EVAL_STEPS_PER_S = 935  # collision FlyAgent evaluation incl. policy inference, 35x36 at 1.5 %
+
+
+def time_env(envs: int, drones: int, fire_percentage: float, steps: int, policy: str | None, collision: bool = True,
+             seed: int = 0) -> dict:
+    """Env-steps/s of the FlyAgent vector env (complex policy, collisions on), random actions or a network.
+
+    ``policy``: None (random actions drawn in torch), "simple" or "collision" (the FlyAgent encoder + actor,
+    inference only, no grad). The first steps (kernel compilation) are not timed.
+    """
+    import torch
+
+    from roshan.algos.networks import ActorCritic, flatten_drones
+    from roshan.config import DroneConfig
+    from roshan.env.fly import FlyConfig, FlyVectorEnv
+
+    cfg = Config(ignition=IgnitionConfig(fire_percentage=fire_percentage), drones=DroneConfig(num_drones=drones))
+    env = FlyVectorEnv(envs, cfg, FlyConfig(policy="complex", collision=collision), seed=seed)
+    obs, _ = env.reset(seed=seed)
+    net = None if policy is None else ActorCritic(collision=policy == "collision").eval()
+    gen = torch.Generator().manual_seed(seed)
+
+    def act(o):
+        if net is None:
+            return torch.rand((envs, drones, 2), generator=gen) * 2 - 1
+        with torch.no_grad():
+            mean, std = net.actor(flatten_drones(o))
+            return (mean + std * torch.randn(mean.shape, generator=gen)).view(envs, drones, 2)
+
+    for _ in range(3):
+        obs, *_ = env.step(act(obs))
+    ended = 0
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        obs, _, term, trunc, _ = env.step(act(obs))
+        ended += int((term | trunc).sum())
+    elapsed = time.perf_counter() - t0
+    return {"envs": envs, "drones": drones, "fire_percentage": fire_percentage, "policy": policy or "random",
+            "steps": steps, "seconds": elapsed, "env_steps_per_s": envs * steps / elapsed,
+            "agent_steps_per_s": envs * drones * steps / elapsed, "episodes_ended": ended,
+            "memory_bytes_per_env": env.fire.memory_bytes_per_env()}
+
+
+def env_speed(env_counts=(1, 64, 256, 1024, 4096), drones: int = 4, fire_percentages=(0.015, 0.35),
+              policies=(None, "simple", "collision"), min_env_steps: int = 200_000, max_steps: int = 2000) -> dict:
+    """The env benchmark: steps per run chosen so each run makes >= ``min_env_steps`` env-steps (capped)."""
+    runs = []
+    for pct in fire_percentages:
+        for e in env_counts:
+            steps = max(20, min(max_steps, min_env_steps // e))
+            for pol in policies:
+                steps_pol = steps if pol != "collision" else max(10, steps // 4)
+                runs.append(time_env(e, drones, pct, steps_pol, pol))
+    return {"threads": os.cpu_count(), "runs": runs, "original_eval_env_steps_per_s": ORIGINAL_FLY_EVAL_STEPS_PER_S}
+
+
+def format_env_speed(report: dict) -> str:
+    lines = [f"{'ign':>6}{'E':>6}{'policy':>11}{'env-steps/s':>14}{'agent-steps/s':>15}{'x original':>12}"]
+    for r in report["runs"]:
+        lines.append(f"{r['fire_percentage'] * 100:>5.1f}%{r['envs']:>6}{r['policy']:>11}"
+                     f"{r['env_steps_per_s']:>14,.0f}{r['agent_steps_per_s']:>15,.0f}"
+                     f"{r['env_steps_per_s'] / report['original_eval_env_steps_per_s']:>12.1f}")
+    return "\n".join(lines)
