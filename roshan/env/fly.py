@@ -138,12 +138,17 @@ class FlyKernels:
         any_terminal = 0
         any_failed = 0
         last_reason = 0
+        real_end = 0  # some drone ended for a reason other than the clock (goal, fires out, crash, exit)
         reward_sum = 0.0
         for d in range(dr.num_drones):
             dr.move_drone(e, d, ti.Vector([actions[e, d, 0], actions[e, d, 1]]))
             goal_flag |= self.handle_goal(e, d)
-            reason = self.failure_reason(e, d, timed_out)
-            terminal = ti.cast(reason != 0 or self.has_succeeded(e, d) != 0, ti.i32)
+            succeeded = self.has_succeeded(e, d)
+            reason = self.failure_reason(e, d, 0)
+            real_end |= ti.cast(reason != 0 or succeeded != 0, ti.i32)
+            if timed_out != 0:
+                reason = TIMEOUT  # agents.md 9: the timeout overwrites the other reasons in the record
+            terminal = ti.cast(reason != 0 or succeeded != 0, ti.i32)
             if terminal != 0:
                 any_terminal = 1
                 if reason != 0:
@@ -159,8 +164,10 @@ class FlyKernels:
         dones[e, 0] = ti.u8(0)
         dones[e, 1] = ti.u8(0)
         if any_terminal != 0:
-            dones[e, 1] = ti.cast(timed_out, ti.u8)
-            dones[e, 0] = ti.cast(1 - timed_out, ti.u8)
+            # A state that really ends the task terminates even on the last allowed step (no bootstrapping
+            # from a crash or a success); only a pure time-out truncates.
+            dones[e, 0] = ti.cast(real_end, ti.u8)
+            dones[e, 1] = ti.cast(1 - real_end, ti.u8)
             self.record_episode(episode, e, 1 - any_failed, last_reason)
             self.ended[e] = 1
 
@@ -279,12 +286,17 @@ class FlyVectorEnv(gym.vector.VectorEnv):
         self._info = {"final_obs": self._views(self._final_buf),
                       "episode": {k: self._episode[:, i] for i, k in enumerate(EPISODE_FIELDS)}}
         self._renderer = None
+        self._has_reset = False
 
     def _define_spaces(self, num_envs: int, n: int, frames: int) -> None:
         box = gym.spaces.Box
+        # Every feature is clipped to [-1, 1] except the drone id (0..N-1, fed raw as in the reference).
+        low = np.full((n, frames, observe.OWN_FEATURES), -1.0, np.float32)
+        high = np.ones_like(low)
+        low[..., 0], high[..., 0] = 0.0, n - 1
         self.single_observation_space = gym.spaces.Dict({
-            "agent": box(-np.inf, np.inf, (n, frames, observe.OWN_FEATURES), np.float32),
-            "neighbors": box(-np.inf, np.inf, (n, frames, n, 4), np.float32),
+            "agent": box(low, high, dtype=np.float32),
+            "neighbors": box(-1.0, 1.0, (n, frames, n, 4), np.float32),
             "neighbors_mask": box(0.0, 1.0, (n, frames, n), np.float32),
         })
         self.single_action_space = box(-1.0, 1.0, (n, 2), np.float32)
@@ -308,10 +320,13 @@ class FlyVectorEnv(gym.vector.VectorEnv):
         self.kernels.reset_all(self._obs_buf, self._final_buf, self.fire.seed_key)
         self._episode.zero_()
         self._dones.zero_()
+        self._has_reset = True
         return self._obs, {}
 
     def step(self, actions):
         """Advance every env by one FlyAgent step; envs that end are reset in the same call."""
+        if not self._has_reset:
+            raise gym.error.ResetNeeded("FlyVectorEnv.step() before reset(): call reset() first")
         a = self._check_actions(actions)
         k = self.kernels
         k.step(a, self._obs_buf, self._rewards, self._dones, self._episode)

@@ -226,3 +226,22 @@ def test_same_seed_same_trajectory():
 
     assert torch.equal(rollout(5), rollout(5))
     assert not torch.equal(rollout(5), rollout(6))
+
+
+def test_a_real_end_on_the_last_allowed_step_terminates_instead_of_truncating():
+    env = make_env(fly=FlyConfig(k_turn=0.01))
+    for _ in range(env.t_max - 1):
+        scene(env, [[100.0, 100.0]], [[20.5, 20.5]])
+        act(env, 0.0, 0.0)
+    scene(env, [[104.0, 204.0]], [[10.5, 20.5]])  # reaches its goal exactly when the clock runs out
+    _, _, term, trunc, info = act(env, 0.0, 0.0)
+    assert bool(term[0]) and not bool(trunc[0])
+    assert REASONS[int(info["episode"]["reason"][0])] == "timeout"  # the record keeps the spec's precedence
+
+
+def test_step_before_reset_is_an_error():
+    import gymnasium as gym
+
+    env = FlyVectorEnv(1, Config(ignition=EMPTY, drones=DroneConfig(num_drones=1), wind=WindConfig(speed=0.0)))
+    with pytest.raises(gym.error.ResetNeeded):
+        env.step(np.zeros((1, 1, 2), np.float32))
