@@ -71,8 +71,8 @@ def env_loop_padding(num_envs: int) -> int:
     """
     from roshan.runtime import current_arch
 
-    if current_arch() not in (None, "cpu"):
-        return 1  # GPUs schedule one thread per iteration anyway
+    if current_arch() not in (None, "cpu") or num_envs == 1:
+        return 1  # GPUs schedule one thread per iteration anyway; one env is one task whatever the padding
     import taichi.lang.impl as impl
 
     threads = max(1, impl.current_cfg().cpu_max_num_threads)
