@@ -47,15 +47,28 @@ def main():
               help="Record statistics (and a frame) every K steps.")
 @click.option("--gif", type=click.Path(dir_okay=False), default=None, help="Stitch the frames into this GIF.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
-              help="Write {config, series, timing} here.")
+              help="Write {config, series, timing} (and drones, with --drones) here.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--drones", type=int, default=None, metavar="N",
+              help="Fly N drones per env (FlyAgent envs, complex policy: drones put out the nearest unreserved "
+                   "fire); default: the fire alone.")
+@click.option("--policy", type=click.Choice(["greedy", "random"]), default=None,
+              help="How the drones fly (needs --drones): greedy = straight to the goal (default), random = "
+                   "uniform actions.")
 @SETS
 @ARCH
 @THREADS
 def simulate(config_path, map_name, envs, steps, seed, fire_percentage, clusters, pattern, wind_speed,
-             wind_direction, frames, every, gif, json_path, quiet, sets, arch, threads):
-    """Run the fire model on E envs of a map and summarise (optionally frames, a GIF and a JSON series)."""
+             wind_direction, frames, every, gif, json_path, quiet, drones, policy, sets, arch, threads):
+    """Run the fire model on E envs of a map and summarise (optionally frames, a GIF and a JSON series).
+
+    With --drones N every env is a FlyAgent episode whose drones extinguish fires; episodes that end restart
+    at once, and the summary adds the episodes finished and their success rate.
+    """
     from roshan import simulate as sim_mod
+
+    if policy is not None and drones is None:
+        raise click.UsageError("--policy needs --drones N (without drones only the fire is simulated)")
 
     flags = {"map.name": map_name, "sim.envs": envs, "sim.seed": seed, "ignition.fire_percentage": fire_percentage,
              "ignition.clusters": clusters, "ignition.pattern": pattern, "wind.speed": wind_speed,
@@ -64,7 +77,8 @@ def simulate(config_path, map_name, envs, steps, seed, fire_percentage, clusters
     try:
         cfg = load_config(config_path, overrides)
         result = sim_mod.run_simulation(cfg, steps, every, Path(frames) if frames else None,
-                                        Path(gif) if gif else None, progress=not quiet)
+                                        Path(gif) if gif else None, progress=not quiet, drones=drones,
+                                        policy=policy or "greedy")
     except (ConfigError, MapError, ValueError, FileNotFoundError) as exc:
         _fail(exc)
     for line in sim_mod.summary_lines(result):

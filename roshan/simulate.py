@@ -1,4 +1,9 @@
-"""``roshan simulate``: run the fire model on E envs, record a series, optionally dump frames and a GIF."""
+"""``roshan simulate``: run the fire model on E envs, record a series, optionally dump frames and a GIF.
+
+With ``drones=N`` the envs are FlyAgent envs (:class:`~roshan.env.fly.FlyVectorEnv`, complex policy: drones
+extinguish the nearest unreserved fire) flown by a scripted policy of :mod:`roshan.env.heuristics`; one env
+step is one fire update, and envs whose episode ends restart at once (same-step autoreset).
+"""
 
 from __future__ import annotations
 
@@ -9,12 +14,15 @@ from pathlib import Path
 
 import numpy as np
 
-from roshan.config import Config, to_dict
+from roshan.config import Config, ConfigError, replace, to_dict
 from roshan.kernels.fire import FireSim
 from roshan.maps import load_map
 from roshan.runtime import init_taichi
 
 SERIES_KEYS = ("burning", "burned", "convection", "radiation", "dropped_convection", "dropped_radiation")
+# With drones, per env: episodes finished and successful so far, cells extinguished in the current episode and
+# in all episodes so far, and the steps of the current episode.
+DRONE_SERIES_KEYS = ("episodes", "successes", "extinguished", "extinguished_total", "episode_step")
 
 
 @dataclass
@@ -25,6 +33,7 @@ class SimulationResult:
     timing: dict = field(default_factory=dict)
     frames: list[Path] = field(default_factory=list)
     gif: Path | None = None
+    drones: dict | None = None  # drone runs: drones, policy, t_max, episodes, successes, success_rate, extinguished
 
 
 def build_sim(cfg: Config) -> FireSim:
@@ -44,20 +53,23 @@ def record(sim: FireSim) -> dict:
 
 
 def run_simulation(cfg: Config, steps: int, every: int = 100, frames_dir: Path | None = None,
-                   gif: Path | None = None, progress: bool = True) -> SimulationResult:
+                   gif: Path | None = None, progress: bool = True, drones: int | None = None,
+                   policy: str = "greedy") -> SimulationResult:
     """Reset all envs, advance ``steps`` updates in chunks of ``every``, recording stats after each chunk.
 
-    Frames (env 0) are written every ``every`` steps when ``frames_dir`` or ``gif`` is given.
+    Frames (env 0) are written every ``every`` steps when ``frames_dir`` or ``gif`` is given. ``drones=N``
+    flies N drones per env with ``policy`` (``"greedy"`` or ``"random"``, see :func:`run_drone_simulation`);
+    ``None`` simulates the fire alone.
     """
-    if steps < 0 or every < 1:
-        raise ValueError(f"steps must be >= 0 and every >= 1 (got steps={steps}, every={every})")
+    if drones is not None:
+        return run_drone_simulation(cfg, steps, drones, policy, every, frames_dir, gif, progress)
+    _check_steps(steps, every)
     sim = build_sim(cfg)
     renderer = None
     if frames_dir is not None or gif is not None:
         from roshan.kernels.render import FrameRenderer
 
-        frames_dir = Path(frames_dir) if frames_dir is not None else Path(gif).with_suffix("").parent / "frames"
-        frames_dir.mkdir(parents=True, exist_ok=True)
+        frames_dir = _frames_dir(frames_dir, gif)
         renderer = FrameRenderer(sim)
     result = SimulationResult()
     t0 = time.perf_counter()
@@ -85,29 +97,183 @@ def run_simulation(cfg: Config, steps: int, every: int = 100, frames_dir: Path |
                                                                                 + np.sum(rec["radiation"])))
     if bar is not None:
         bar.close()
+    _finish_frames(renderer, result, gif)
+    result.timing = _timing(steps, cfg.sim.envs, t_reset, sim_seconds, sim.memory_bytes_per_env(), t0)
+    return result
+
+
+class _EpisodeTally:
+    """Per-env running totals of finished episodes, successes and extinguished cells, kept as torch tensors so
+    the step loop never waits on a host copy."""
+
+    def __init__(self, env):
+        import torch  # here, not at the top: fire-only runs never need torch
+
+        self.env = env
+        self.episodes, self.successes, self.extinguished = (
+            torch.zeros(env.num_envs, dtype=torch.int64, device=env.device) for _ in range(3))
+
+    def add(self, info: dict) -> None:
+        # info's tensors are overwritten by the next step, so they are folded in right away.
+        ended = info["_episode_stats"]
+        ep = info["episode_stats"]
+        self.episodes += ended
+        self.successes += ended & (ep["success"] > 0.5)
+        self.extinguished += ended * ep["extinguished"].round().long()
+
+    def record(self, done: int) -> dict:
+        """A series record after ``done`` steps: the fire's SERIES_KEYS plus DRONE_SERIES_KEYS, per env."""
+        fire = self.env.fire
+        stats = fire.stats()
+        rec = {"step": done, "time_s": round(done * fire.dt, 6)}
+        rec.update({k: stats[k].tolist() for k in SERIES_KEYS})
+        current = stats["extinguished"]
+        rec.update(episodes=self.episodes.tolist(), successes=self.successes.tolist(), extinguished=current.tolist(),
+                   extinguished_total=(self.extinguished.cpu().numpy() + current).tolist(),
+                   episode_step=fire.steps_since_reset().tolist())
+        return rec
+
+
+def run_drone_simulation(cfg: Config, steps: int, drones: int, policy: str = "greedy", every: int = 100,
+                         frames_dir: Path | None = None, gif: Path | None = None,
+                         progress: bool = True) -> SimulationResult:
+    """``run_simulation`` with ``drones`` drones per env, each env a FlyVectorEnv episode (complex policy).
+
+    ``policy``: ``"greedy"`` (the greedy baseline: the complex policy's nearest-unreserved-fire goals flown by
+    :func:`~roshan.env.heuristics.straight_to_goal`) or ``"random"`` (uniform actions, seeded by
+    ``cfg.sim.seed``). Records add, per env, :data:`DRONE_SERIES_KEYS`; ``step`` counts the run's steps
+    (every env has made that many, across episodes). Frames show env 0 with its drones; its episode number
+    is in the file name, since env 0 carries on into a new episode whenever one ends.
+    """
+    from roshan.env.heuristics import POLICIES
+
+    _check_steps(steps, every)
+    if isinstance(drones, bool) or not isinstance(drones, int | np.integer) or drones < 1:
+        raise ValueError(f"--drones: expected a positive number of drones per env, got {drones!r} "
+                         "(leave --drones out to simulate the fire alone)")
+    if policy not in POLICIES:
+        raise ValueError(f"--policy: expected one of {', '.join(POLICIES)}, got {policy!r}")
+    try:
+        cfg = replace(cfg, drones={**to_dict(cfg.drones), "num_drones": int(drones)})
+    except ConfigError as exc:
+        raise ConfigError(f"--drones: {exc}") from exc
+    init_taichi(cfg.sim.arch, cfg.sim.threads or None)
+    env, fly = _build_fly_env(cfg)
+    renderer = overlay = None
+    if frames_dir is not None or gif is not None:
+        from roshan.kernels.render import FrameRenderer, drone_overlay
+
+        frames_dir = _frames_dir(frames_dir, gif)
+        renderer, overlay = FrameRenderer(env.fire), drone_overlay(env.drones, 0)
+    result = SimulationResult()
+    tally = _EpisodeTally(env)
+    t0 = time.perf_counter()
+    obs, _ = env.reset()
+    result.series.append(tally.record(0))
+    t_reset = time.perf_counter() - t0
+
+    def save_frame(rec: dict) -> None:
+        if renderer is not None:
+            name = _frame_name(rec["step"], rec["time_s"], episode=rec["episodes"][0])
+            result.frames.append(renderer.save_png(frames_dir / name, overlay=overlay))
+
+    save_frame(result.series[0])
+    step_seconds = 0.0
+    bar = _progress(steps, progress)
+    generator = _generator(cfg.sim.seed, env.device)
+    done = 0
+    while done < steps:
+        n = min(every, steps - done)
+        t1 = time.perf_counter()
+        obs = _fly(env, obs, n, policy, generator, tally)
+        rec = tally.record(done + n)  # host copies wait for the kernels, so the timing is honest
+        step_seconds += time.perf_counter() - t1
+        done += n
+        result.series.append(rec)
+        save_frame(rec)
+        if bar is not None:
+            bar.update(n)
+            bar.set_postfix(burning=int(np.sum(rec["burning"])), episodes=int(np.sum(rec["episodes"])))
+    if bar is not None:
+        bar.close()
+    env.close()
+    _finish_frames(renderer, result, gif)
+    result.timing = _timing(steps, cfg.sim.envs, t_reset, step_seconds, env.fire.memory_bytes_per_env(), t0)
+    result.drones = _drone_summary(result.series[-1], int(drones), policy, fly, env.t_max)
+    return result
+
+
+def _build_fly_env(cfg: Config):
+    from roshan.env.fly import FlyConfig, FlyVectorEnv
+
+    fly = FlyConfig(policy="complex")
+    return FlyVectorEnv(num_envs=cfg.sim.envs, config=cfg, fly=fly, seed=cfg.sim.seed), fly
+
+
+def _fly(env, obs: dict, n: int, policy: str, generator, tally: _EpisodeTally) -> dict:
+    """Advance every env ``n`` steps under ``policy``, counting the episodes that end."""
+    from roshan.env.heuristics import policy_actions
+
+    for _ in range(n):
+        obs, _, _, _, info = env.step(policy_actions(policy, env, obs, generator))
+        tally.add(info)
+    return obs
+
+
+def _generator(seed: int, device):
+    import torch
+
+    return torch.Generator(device=device).manual_seed(int(seed))
+
+
+def _drone_summary(last: dict, drones: int, policy: str, fly, t_max: int) -> dict:
+    episodes, successes = int(np.sum(last["episodes"])), int(np.sum(last["successes"]))
+    return {"drones": drones, "policy": policy, "fly_policy": fly.policy, "t_max": t_max, "episodes": episodes,
+            "successes": successes, "success_rate": successes / episodes if episodes else None,
+            "extinguished": int(np.sum(last["extinguished_total"]))}
+
+
+def _check_steps(steps: int, every: int) -> None:
+    if steps < 0 or every < 1:
+        raise ValueError(f"steps must be >= 0 and every >= 1 (got steps={steps}, every={every})")
+
+
+def _frames_dir(frames_dir: Path | None, gif: Path | None) -> Path:
+    frames_dir = Path(frames_dir) if frames_dir is not None else Path(gif).with_suffix("").parent / "frames"
+    frames_dir.mkdir(parents=True, exist_ok=True)
+    return frames_dir
+
+
+def _finish_frames(renderer, result: SimulationResult, gif: Path | None) -> None:
     if renderer is not None:
         renderer.close()
         if gif is not None:
             from roshan.kernels.render import write_gif
 
             result.gif = write_gif(result.frames, Path(gif))
-    env_steps = steps * cfg.sim.envs
-    result.timing = {
+
+
+def _timing(steps: int, envs: int, t_reset: float, step_seconds: float, memory: int, t0: float) -> dict:
+    env_steps = steps * envs
+    return {
         "steps": steps,
-        "envs": cfg.sim.envs,
+        "envs": envs,
         "reset_s": t_reset,
-        "step_s": sim_seconds,
-        "env_steps_per_s": env_steps / sim_seconds if sim_seconds > 0 else float("nan"),
-        "memory_bytes_per_env": sim.memory_bytes_per_env(),
+        "step_s": step_seconds,
+        "env_steps_per_s": env_steps / step_seconds if step_seconds > 0 else float("nan"),
+        "memory_bytes_per_env": memory,
         "wall_s": time.perf_counter() - t0,
     }
-    return result
 
 
 def write_json(cfg: Config, result: SimulationResult, path: Path) -> None:
-    """``{"config": ..., "series": [...], "timing": {...}}``; all but ``timing`` is a function of the seed."""
-    Path(path).write_text(json.dumps({"config": to_dict(cfg), "series": result.series, "timing": result.timing},
-                                     indent=1))
+    """``{"config": ..., "series": [...], "timing": {...}}`` (plus ``"drones": {...}`` for drone runs); all but
+    ``timing`` is a function of the seed. For drone runs ``config.drones.num_drones`` is the run's N."""
+    data = {"config": to_dict(cfg), "series": result.series, "timing": result.timing}
+    if result.drones is not None:
+        data["config"]["drones"]["num_drones"] = result.drones["drones"]
+        data["drones"] = result.drones
+    Path(path).write_text(json.dumps(data, indent=1))
 
 
 def summary_lines(result: SimulationResult) -> list[str]:
@@ -126,6 +292,8 @@ def summary_lines(result: SimulationResult) -> list[str]:
     dropped = int(np.sum(last["dropped_convection"]) + np.sum(last["dropped_radiation"]))
     if dropped:
         lines.append(f"WARNING: {dropped} particles dropped (pool full); raise fire.conv_capacity / rad_capacity")
+    if result.drones is not None:
+        lines.extend(_drone_lines(result.drones))
     lines.append(f"memory per env: {t['memory_bytes_per_env'] / 1024:.1f} KiB")
     if result.gif is not None:
         lines.append(f"gif: {result.gif}")
@@ -134,8 +302,20 @@ def summary_lines(result: SimulationResult) -> list[str]:
     return lines
 
 
-def _frame_name(step: int, time_s: float) -> str:
-    return f"frame_{step:07d}_t{time_s:08.1f}s.png"
+def _drone_lines(d: dict) -> list[str]:
+    rate = "n/a" if d["success_rate"] is None else f"{100 * d['success_rate']:.1f} %"
+    lines = [f"drones: {d['drones']} per env, policy {d['policy']} ({d['fly_policy']} goals); episodes finished "
+             f"{d['episodes']} (all envs), success rate {rate} ({d['successes']}/{d['episodes']}); "
+             f"cells extinguished {d['extinguished']}"]
+    if d["episodes"] == 0:
+        lines.append(f"no episode ended yet: an episode lasts at most {d['t_max']} steps (or until every fire is out)")
+    return lines
+
+
+def _frame_name(step: int, time_s: float, episode: int | None = None) -> str:
+    # Drone runs: env 0 restarts whenever its episode ends, so the name says which episode the frame shows.
+    suffix = "" if episode is None else f"_ep{episode:04d}"
+    return f"frame_{step:07d}_t{time_s:08.1f}s{suffix}.png"
 
 
 def _progress(total: int, enabled: bool):

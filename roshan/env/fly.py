@@ -247,9 +247,9 @@ class FlyVectorEnv(gym.vector.VectorEnv):
     terminations and truncations (E,) (a timeout truncates). The same tensor objects are returned by every
     call. Actions (E, N, 2) in [-1, 1] (torch or numpy; values outside are clipped, NaN/inf raise).
 
-    ``info`` holds ``final_obs`` (the observation of envs that ended this step, same layout), ``episode``
+    ``info`` holds ``final_obs`` (the observation of envs that ended this step, same layout), ``episode_stats``
     (a dict of (E,) tensors: success, reason index into :data:`REASONS`, steps, burned_fraction, extinguished,
-    return) and ``_episode`` (the (E,) bool mask of envs whose episode ended).
+    return) and ``_episode_stats`` (the (E,) bool mask of envs whose episode ended).
     """
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": ["rgb_array"]}
@@ -283,8 +283,9 @@ class FlyVectorEnv(gym.vector.VectorEnv):
         self._obs = self._views(self._obs_buf)
         done_bool = self._dones.view(torch.bool)
         self.terminations, self.truncations = done_bool[:, 0], done_bool[:, 1]
+        # "episode_stats", not "episode": gymnasium's RecordEpisodeStatistics writes info["episode"] itself.
         self._info = {"final_obs": self._views(self._final_buf),
-                      "episode": {k: self._episode[:, i] for i, k in enumerate(EPISODE_FIELDS)}}
+                      "episode_stats": {k: self._episode[:, i] for i, k in enumerate(EPISODE_FIELDS)}}
         self._renderer = None
         self._has_reset = False
 
@@ -335,8 +336,8 @@ class FlyVectorEnv(gym.vector.VectorEnv):
         if self.device.type != "cpu" or bool(self._dones.any()):
             k.restart(self._obs_buf, self._final_buf, self.fire.seed_key, 1)
         info = dict(self._info)
-        info["_episode"] = self.terminations | self.truncations
-        info["_final_obs"] = info["_episode"]
+        info["_episode_stats"] = self.terminations | self.truncations
+        info["_final_obs"] = info["_episode_stats"]
         return self._obs, self._rewards, self.terminations, self.truncations, info
 
     def _check_actions(self, actions) -> torch.Tensor:
@@ -355,12 +356,13 @@ class FlyVectorEnv(gym.vector.VectorEnv):
         return a
 
     def render(self):
-        """An RGB frame (H, W, 3) uint8 of env 0 (fire, particles; drones are drawn by later overlays)."""
-        from roshan.kernels.render import FrameRenderer
+        """An RGB frame (H, W, 3) uint8 of env 0: land cover, fire, particles, drones, goals, groundstation."""
+        from roshan.kernels.render import FrameRenderer, drone_overlay
 
         if self._renderer is None:
             self._renderer = FrameRenderer(self.fire, backend="raster")
-        return self._renderer.render()
+            self._overlay = drone_overlay(self.drones)
+        return self._renderer.render(overlay=self._overlay)
 
     def close(self, **kwargs):
         if self._renderer is not None:

@@ -22,7 +22,7 @@ from roshan.config import Config
 from roshan.config import replace as replace_validated
 from roshan.env.fly import REASONS, FlyConfig, FlyVectorEnv
 
-# Not "episode": gymnasium's RecordEpisodeStatistics (and SB3's Monitor) write info["episode"] themselves and
+# Not "episode": gymnasium's RecordEpisodeStatistics (and SB3's Monitor) write info["episode_stats"] themselves and
 # refuse an env that already fills it.
 EPISODE_KEY = "episode_record"
 
@@ -47,7 +47,7 @@ def build_configs(config: Config | None = None, fly: FlyConfig | None = None, *,
 
 
 def episode_record(episode: dict, index: int = 0) -> dict[str, Any]:
-    """Env ``index``'s row of the vector env's ``info["episode"]`` as plain Python values (reason as a name)."""
+    """Env ``index``'s row of the vector env's ``info["episode_stats"]`` as plain Python values (reason as a name)."""
     row = {k: float(v[index]) for k, v in episode.items()}
     row["reason"] = REASONS[int(row["reason"])]
     row["steps"] = int(row["steps"])
@@ -90,10 +90,10 @@ class _FlyCore:
         if a.shape != shape:
             raise ValueError(f"action: expected shape {shape}, got {a.shape}")
         obs, rewards, term, trunc, info = self.vec.step(a[None])
-        self.ended = bool(info["_episode"][0])
+        self.ended = bool(info["_episode_stats"][0])
         # On an episode end ``obs`` already holds the next episode's start; the caller gets the terminal frame.
         out = self.numpy_obs(info["final_obs"] if self.ended else obs)
-        record = episode_record(info["episode"]) if self.ended else None
+        record = episode_record(info["episode_stats"]) if self.ended else None
         return out, rewards[0].detach().cpu().numpy().copy(), bool(term[0]), bool(trunc[0]), record
 
     def render(self, render_mode: str | None):

@@ -17,7 +17,9 @@ edge) and pixel column = grid column, ``cell_px`` pixels per cell:
 3. ``overlay`` (optional argument of :meth:`FrameRenderer.render`): a callable ``overlay(image, cell_px)``
    that may draw into the same field, e.g. drones. ``image`` is the ``ti.Vector.field(3, ti.u8, (H, W))``
    above (north-up, ``[py, px]``); a point at ``(x1, x2)`` metres lies at pixel
-   ``(x1 / cell_size * cell_px, x2 / cell_size * cell_px)``.
+   ``(x1 / cell_size * cell_px, x2 / cell_size * cell_px)``. :func:`drone_overlay` is such a callable: the
+   drones of one env of a :class:`~roshan.kernels.drones.DroneSim` as discs, view squares and goal crosses in
+   one colour per drone id, and the groundstation cell as a white outline.
 4. ``_draw_wind_arrow``: a white arrow on a dark disc in the top-right corner points where the wind blows
    (wind component 1 = south = down the image, component 2 = east = right). A calm wind shows a dot.
 
@@ -312,6 +314,125 @@ class FrameRenderer:
     def _flip_to_display(self):
         for py, px in self.image:
             self._display[px, self.height - 1 - py] = self.image[py, px]
+
+
+# ---------------------------------------------------------------------------------------------- drones
+
+# Drone colours by id: saturated blues, purples and pinks, none of them a land-cover class colour nor in the
+# fire palette (reds, oranges, yellows), nor white (the groundstation).
+DRONE_PALETTE = ((255, 0, 255), (0, 191, 255), (148, 0, 211), (255, 105, 180), (0, 0, 160), (0, 128, 128),
+                 (186, 85, 211), (65, 105, 225))
+DRONE_RIM = (0, 0, 0)  # one-pixel dark rim so discs stand out on any land colour
+GROUNDSTATION_COLOUR = (255, 255, 255)
+MIN_DRONE_RADIUS_PX = 3.0
+
+
+def drone_colours(n: int) -> np.ndarray:
+    """(n, 3) uint8 colours of drones 0..n-1: :data:`DRONE_PALETTE`, then golden-ratio hues of lighter shades."""
+    import colorsys
+
+    out = [DRONE_PALETTE[i] for i in range(min(n, len(DRONE_PALETTE)))]
+    for i in range(len(out), n):
+        # Beyond the fixed palette keep going round the colour wheel; the golden-ratio step spreads any count.
+        hue = (0.55 + 0.618034 * (i - len(DRONE_PALETTE))) % 1.0
+        out.append(tuple(round(255 * c) for c in colorsys.hsv_to_rgb(hue, 0.55 + 0.4 * (i % 2), 1.0)))
+    return np.asarray(out, np.uint8).reshape(n, 3)
+
+
+@ti.func
+def _fill_rect(image: ti.template(), r0, r1, c0, c1, colour):
+    """Set the pixels of rows [r0, r1) x columns [c0, c1), clipped to the image."""
+    for py, px in ti.ndrange((ti.max(r0, 0), ti.min(r1, image.shape[0])), (ti.max(c0, 0), ti.min(c1, image.shape[1]))):
+        image[py, px] = colour
+
+
+@ti.func
+def _outline(image: ti.template(), r0, r1, c0, c1, t, colour):
+    """A ``t``-pixel outline just inside rows [r0, r1) x columns [c0, c1)."""
+    _fill_rect(image, r0, ti.min(r0 + t, r1), c0, c1, colour)
+    _fill_rect(image, ti.max(r1 - t, r0), r1, c0, c1, colour)
+    _fill_rect(image, r0, r1, c0, ti.min(c0 + t, c1), colour)
+    _fill_rect(image, r0, r1, ti.max(c1 - t, c0), c1, colour)
+
+
+@ti.data_oriented
+class DroneOverlay:
+    """An ``overlay(image, cell_px)`` for :meth:`FrameRenderer.render` drawing the drones of env ``env``.
+
+    Per drone, in its colour (:func:`drone_colours`, by id): the view square (outline, ``view_range`` cells
+    wide, centred on the drone), the goal (a cross) and the drone (a filled disc with a dark rim, radius
+    ``max(3 px, drone_size / cell_size * cell_px)``); the groundstation cell gets a white outline. Layers go
+    groundstation, view squares, goals, discs, so drones are never hidden; within a layer drones are drawn in
+    id order by a serial loop, so overlapping marks always come out the same. Positions are read from the
+    DroneSim's fields at each call (north up like the cells: metres along rows go down the image).
+    """
+
+    def __init__(self, drones, env: int = 0):
+        self.drones = drones
+        self.env = env
+        self.palette = ti.Vector.field(3, ti.u8, drones.num_drones)
+        self.palette.from_numpy(drone_colours(drones.num_drones))
+
+    @property
+    def env(self) -> int:
+        return self._env
+
+    @env.setter
+    def env(self, env: int) -> None:
+        if not 0 <= env < self.drones.num_envs:
+            raise ValueError(f"env must be in 0..{self.drones.num_envs - 1}, got {env}")
+        self._env = int(env)
+
+    def __call__(self, image, cell_px: int) -> None:
+        if tuple(image.shape) != (self.drones.rows * cell_px, self.drones.cols * cell_px):
+            raise ValueError(f"image {tuple(image.shape)} does not match the drones' map at {cell_px} px per cell")
+        self._draw(image, self.env, int(cell_px))
+
+    @ti.kernel
+    def _draw(self, image: ti.template(), env: ti.i32, cell_px: ti.i32):
+        dr = self.drones
+        px_per_m = ti.cast(cell_px, ti.f32) / dr.cell
+        thick = ti.max(1, cell_px // 8)
+        line = ti.max(1, cell_px // 12)
+        half_view = dr.half_view * cell_px
+        arm = ti.max(3.0, 0.3 * cell_px)
+        radius = ti.max(MIN_DRONE_RADIUS_PX, dr.cfg.drone_size * px_per_m)
+        rim = ti.Vector(DRONE_RIM, ti.u8)
+        gs = dr.groundstation[env] * cell_px
+        _outline(image, gs[0], gs[0] + cell_px, gs[1], gs[1] + cell_px, thick, ti.Vector(GROUNDSTATION_COLOUR, ti.u8))
+        ti.loop_config(serialize=True)
+        for d in range(dr.num_drones):
+            c = dr.pos[env, d] * px_per_m
+            _outline(image, ti.round(c[0] - half_view, ti.i32), ti.round(c[0] + half_view, ti.i32),
+                     ti.round(c[1] - half_view, ti.i32), ti.round(c[1] + half_view, ti.i32), line, self.palette[d])
+        ti.loop_config(serialize=True)
+        for d in range(dr.num_drones):
+            g = dr.goal[env, d] * cell_px  # grid units -> pixels
+            gy, gx = ti.floor(g[0], ti.i32), ti.floor(g[1], ti.i32)
+            lo, hi = ti.floor(-arm, ti.i32), ti.ceil(arm, ti.i32) + 1
+            h = line // 2 + 1  # the cross is one step thicker than the view outline
+            _fill_rect(image, gy - h, gy + h, gx + lo, gx + hi, self.palette[d])
+            _fill_rect(image, gy + lo, gy + hi, gx - h, gx + h, self.palette[d])
+        ti.loop_config(serialize=True)
+        for d in range(dr.num_drones):
+            c = dr.pos[env, d] * px_per_m
+            outer = radius + 1.0
+            for py, px in ti.ndrange((ti.max(0, ti.floor(c[0] - outer, ti.i32)),
+                                      ti.min(image.shape[0], ti.ceil(c[0] + outer, ti.i32))),
+                                     (ti.max(0, ti.floor(c[1] - outer, ti.i32)),
+                                      ti.min(image.shape[1], ti.ceil(c[1] + outer, ti.i32)))):
+                d2 = (py + 0.5 - c[0]) ** 2 + (px + 0.5 - c[1]) ** 2
+                if d2 <= radius * radius:
+                    image[py, px] = self.palette[d]
+                elif d2 <= outer * outer:
+                    image[py, px] = rim
+
+
+def drone_overlay(drones, env: int = 0) -> DroneOverlay:
+    """The overlay drawing env ``env`` of ``drones`` (a :class:`~roshan.kernels.drones.DroneSim`); pass it as
+    ``FrameRenderer(drones.fire).render(overlay=drone_overlay(drones))``. Build it once and reuse it: it holds
+    a small Taichi field (the palette) and its kernel compiles on first use."""
+    return DroneOverlay(drones, env)
 
 
 def _arrow_geometry(height: int, width: int) -> tuple[float, float, float] | None:

@@ -71,8 +71,8 @@ def test_goal_reached_ends_the_episode_successfully_and_autoresets():
     scene(env, [[104.0, 204.0]], [[10.5, 20.5]])  # 0.1 cells from the goal on both axes
     obs, r, term, trunc, info = act(env, 0.0, 0.0)
     assert r[0, 0].item() == pytest.approx(1.0)
-    assert bool(term[0]) and not bool(trunc[0]) and bool(info["_episode"][0])
-    assert info["episode"]["success"][0].item() == 1.0 and info["episode"]["steps"][0].item() == 1
+    assert bool(term[0]) and not bool(trunc[0]) and bool(info["_episode_stats"][0])
+    assert info["episode_stats"]["success"][0].item() == 1.0 and info["episode_stats"]["steps"][0].item() == 1
     final = info["final_obs"]["agent"][0, 0, 0]
     assert final[8].item() == pytest.approx(np.hypot(0.1, 0.1) / 5, rel=1e-3)  # distance feature at the end
     gs = env.drones.groundstation.to_numpy()[0]
@@ -87,9 +87,9 @@ def test_boundary_exit_after_two_steps_outside():
     assert not term[0]
     _, r, term, trunc, info = act(env, -1.0, 0.0)
     assert bool(term[0]) and not bool(trunc[0])
-    assert REASONS[int(info["episode"]["reason"][0])] == "boundary"
+    assert REASONS[int(info["episode_stats"]["reason"][0])] == "boundary"
     assert r[0, 0].item() == pytest.approx(-1.0)  # boundary; moving away earns no progress
-    assert info["episode"]["success"][0].item() == 0.0
+    assert info["episode_stats"]["success"][0].item() == 0.0
 
 
 def test_timeout_truncates_with_the_penalty():
@@ -103,7 +103,7 @@ def test_timeout_truncates_with_the_penalty():
         if k < limit - 1:
             assert not term[0] and not trunc[0]
     assert bool(trunc[0]) and not bool(term[0])
-    assert REASONS[int(info["episode"]["reason"][0])] == "timeout"
+    assert REASONS[int(info["episode_stats"]["reason"][0])] == "timeout"
     assert r[0, 0].item() == pytest.approx(-1.0)
 
 
@@ -111,7 +111,7 @@ def test_collision_terminates_with_penalty_and_proximity():
     env = make_env(num_drones=2, fly=FlyConfig(collision=True))
     scene(env, [[150.0, 150.0], [153.0, 150.0]], [[30.5, 30.5], [30.5, 5.5]])  # 3 m apart < 4 m
     _, r, term, _, info = act(env, 0.0, 0.0, 0.0, 0.0)
-    assert bool(term[0]) and REASONS[int(info["episode"]["reason"][0])] == "collision"
+    assert bool(term[0]) and REASONS[int(info["episode_stats"]["reason"][0])] == "collision"
     # previous neighbour entry of each: (+-0.3 cells / 10 = 0.03, 0) -> proximity 0.03 (the 0 adds nothing)
     expected = -1.0 + -0.05 * 0.03
     np.testing.assert_allclose(r[0].numpy(), [expected, expected], rtol=1e-4)
@@ -145,9 +145,9 @@ def test_putting_out_the_last_fire_succeeds():
     act(env, 0.0, 0.0)
     scene(env, [[105.0, 305.0]], [[10.5, 30.5]])
     _, r, term, _, info = act(env, 0.0, 0.0)
-    assert bool(term[0]) and info["episode"]["success"][0].item() == 1.0
+    assert bool(term[0]) and info["episode_stats"]["success"][0].item() == 1.0
     assert r[0, 0].item() == pytest.approx(1.0 + 0.01)
-    assert info["episode"]["extinguished"][0].item() == 2.0
+    assert info["episode_stats"]["extinguished"][0].item() == 2.0
 
 
 def test_greedy_assignment_takes_the_nearest_unreserved_fire_then_the_groundstation():
@@ -236,7 +236,7 @@ def test_a_real_end_on_the_last_allowed_step_terminates_instead_of_truncating():
     scene(env, [[104.0, 204.0]], [[10.5, 20.5]])  # reaches its goal exactly when the clock runs out
     _, _, term, trunc, info = act(env, 0.0, 0.0)
     assert bool(term[0]) and not bool(trunc[0])
-    assert REASONS[int(info["episode"]["reason"][0])] == "timeout"  # the record keeps the spec's precedence
+    assert REASONS[int(info["episode_stats"]["reason"][0])] == "timeout"  # the record keeps the spec's precedence
 
 
 def test_step_before_reset_is_an_error():
