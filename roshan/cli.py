@@ -202,5 +202,37 @@ def bench_fire(env_counts, steps, warmup, big, json_path, arch, threads):
         Path(json_path).write_text(json.dumps(report, indent=1))
 
 
+@bench.command("env")
+@click.option("--envs", "env_counts", default="1,64,256,1024,4096", show_default=True, help="Comma-separated E.")
+@click.option("--drones", type=click.IntRange(min=1), default=4, show_default=True)
+@click.option("--fire", "fire_percentages", default="0.015,0.35", show_default=True, help="Ignition fractions.")
+@click.option("--policies", default="random,simple,collision", show_default=True,
+              help="random (env only), simple / collision (+ FlyAgent network inference).")
+@click.option("--min-env-steps", type=click.IntRange(min=1), default=100_000, show_default=True,
+              help="Timed env-steps per run (the collision network runs a quarter).")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None)
+@ARCH
+@THREADS
+def bench_env(env_counts, drones, fire_percentages, policies, min_env_steps, json_path, arch, threads):
+    """FlyAgent env throughput: env only, and with FlyAgent network inference, against the original."""
+    from roshan import bench as b
+    from roshan.runtime import init_taichi
+
+    init_taichi(arch or "cpu", threads)
+    try:
+        counts = [int(x) for x in env_counts.split(",") if x.strip()]
+        pcts = [float(x) for x in fire_percentages.split(",") if x.strip()]
+    except ValueError as exc:
+        _fail(ValueError(f"--envs / --fire: expected comma-separated numbers ({exc})"))
+    pols = [None if p == "random" else p for p in policies.split(",") if p.strip()]
+    unknown = [p for p in pols if p not in (None, "simple", "collision")]
+    if unknown:
+        _fail(ValueError(f"--policies: unknown {unknown}; expected random, simple, collision"))
+    report = b.env_speed(counts, drones, pcts, pols, min_env_steps=min_env_steps)
+    click.echo(b.format_env_speed(report))
+    if json_path:
+        Path(json_path).write_text(json.dumps(report, indent=1))
+
+
 if __name__ == "__main__":
     sys.exit(main())

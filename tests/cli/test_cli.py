@@ -86,3 +86,13 @@ def test_bench_fire_and_fidelity_run_on_tiny_budgets(tmp_path):
     assert r.exit_code == 0, r.output
     assert "field21_p005" in r.output and "burning" in r.output
     assert (tmp_path / "f.png").stat().st_size > 10_000
+
+
+def test_bench_env_runs_on_a_tiny_budget(tmp_path):
+    out = tmp_path / "env.json"
+    r = invoke("bench", "env", "--envs", "2", "--drones", "2", "--fire", "0.05", "--policies", "random,simple",
+               "--min-env-steps", "40", "--json", out)
+    assert r.exit_code == 0, r.output
+    runs = json.loads(out.read_text())["runs"]
+    assert [run["policy"] for run in runs] == ["random", "simple"]
+    assert all(run["env_steps_per_s"] > 0 and run["agent_steps_per_s"] == 2 * run["env_steps_per_s"] for run in runs)
