@@ -26,7 +26,8 @@ system-deps:
 	fi
 
 demo: install
-	$(PYTHON) -m roshan simulate --map 35x36_Woods --fire-percentage 0.1 --envs 4 --steps 6000 --every 200 --seed 0 \
+	$(PYTHON) -m roshan simulate --map 35x36_Woods --fire-percentage 0.05 --envs 4 --drones 4 --policy greedy \
+		--steps 3000 --every 50 --seed 0 \
 		--frames $(DEMO_DIR)/frames --gif $(DEMO_DIR)/fire.gif --json $(DEMO_DIR)/summary.json
 	@echo "demo: $(DEMO_DIR)/fire.gif, $(DEMO_DIR)/summary.json, $(DEMO_DIR)/frames/"
 
