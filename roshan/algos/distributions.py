@@ -1,0 +1,62 @@
+"""FlyAgent action distributions (learning.md 4): Gaussian with clipping, and the tanh-squashed Gaussian."""
+
+import math
+
+import torch
+from torch.nn import functional as F
+
+EDGE = 1e-6  # stored actions are clamped to +-(1 - EDGE) before atanh
+
+
+class ClippedGaussian:
+    """a ~ N(mean, std) clamped to [-1, 1]; the log-prob is the Gaussian density at the clamped action."""
+
+    def __init__(self, mean: torch.Tensor, std: torch.Tensor):
+        self.base = torch.distributions.Normal(mean, std.expand_as(mean))
+
+    def sample(self) -> torch.Tensor:
+        return self.base.sample().clamp(-1.0, 1.0)
+
+    def log_prob(self, actions: torch.Tensor) -> torch.Tensor:
+        """Summed over the action dimensions: [B, A] -> [B]."""
+        return self.base.log_prob(actions.clamp(-1.0, 1.0)).sum(-1)
+
+    def entropy(self) -> torch.Tensor:
+        """Entropy of the diagonal Normal, summed over dimensions: [B]."""
+        return self.base.entropy().sum(-1)
+
+    @property
+    def mode(self) -> torch.Tensor:
+        return self.base.mean.clamp(-1.0, 1.0)
+
+
+class TanhNormal:
+    """a = tanh(u), u ~ N(mu, std): the exact squashed-Gaussian density, reparameterised sampling."""
+
+    def __init__(self, mu: torch.Tensor, std: torch.Tensor):
+        self.base = torch.distributions.Normal(mu, std.expand_as(mu))
+
+    def rsample(self) -> torch.Tensor:
+        return torch.tanh(self.base.rsample())
+
+    def sample(self) -> torch.Tensor:
+        return torch.tanh(self.base.sample())
+
+    def log_prob(self, actions: torch.Tensor) -> torch.Tensor:
+        """log p(a) = log N(u) - log(1 - tanh(u)^2), u = atanh(a), summed over dimensions: [B, A] -> [B].
+
+        log(1 - tanh(u)^2) = 2 (log 2 - u - softplus(-2u)) is the form that stays finite for large |u|.
+        """
+        a = actions.clamp(-1.0 + EDGE, 1.0 - EDGE)
+        u = torch.atanh(a)
+        log_det = 2.0 * (math.log(2.0) - u - F.softplus(-2.0 * u))
+        return (self.base.log_prob(u) - log_det).sum(-1)
+
+    def entropy(self) -> torch.Tensor:
+        """Entropy of the base Normal averaged over dimensions (the reference's choice; no closed form
+        exists for the squashed density): [B]."""
+        return self.base.entropy().mean(-1)
+
+    @property
+    def mode(self) -> torch.Tensor:
+        return torch.tanh(self.base.mean)
