@@ -138,6 +138,98 @@ def maps_crop(source, bounds, crs, output):
     click.echo(describe_map(m))
 
 
+# ------------------------------------------------------------------------------------------------ train / eval
+
+
+@main.command()
+@click.argument("config_path", required=False, type=click.Path(dir_okay=False))
+@click.option("--name", default=None, help="Run folder name under --root (default: <algo>_<date-time>).")
+@click.option("--root", default="runs", show_default=True, type=click.Path(file_okay=False))
+@click.option("--resume", "resume_dir", default=None, type=click.Path(file_okay=False),
+              help="Continue this run folder from its latest checkpoint (its config.yaml, plus --set).")
+@click.option("--no-eval", is_flag=True, help="Skip the evaluation after training.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@SETS
+@ARCH
+@THREADS
+def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threads):
+    """Train a FlyAgent (PPO, TD3 or IQL per train.algo) from CONFIG (see configs/), or --resume a run.
+
+    Writes runs/<name>/: config.yaml, checkpoints/{latest,best_reward,best_objective}.pt, tb/ (TensorBoard)
+    and eval/ (episodes.csv, summary.json, plots). With train.auto_train = k, k runs with seeds seed..seed+k-1
+    go to runs/<name>/seed_<s>/.
+    """
+    from roshan import train as tr
+    from roshan.run import load_run_config
+
+    flags = {"sim.arch": arch, "sim.threads": threads}
+    overrides = [f"{k}={v}" for k, v in flags.items() if v is not None] + list(sets)
+    try:
+        if resume_dir is not None:
+            if config_path is not None:
+                raise click.UsageError("give either CONFIG or --resume RUN (a resumed run keeps its config)")
+            run_dir = Path(resume_dir)
+            cfg = load_run_config(run_dir / "config.yaml", overrides)
+            results = [tr.train(cfg, run_dir, resume=True, progress_bar=not quiet, evaluate_at_end=not no_eval)]
+        else:
+            cfg = load_run_config(config_path, overrides)
+            results = tr.train_auto(cfg, root, name, progress_bar=not quiet, evaluate_at_end=not no_eval)
+    except (ConfigError, MapError, ValueError, FileNotFoundError) as exc:
+        _fail(exc)
+    for res in results:
+        click.echo(tr.result_lines(res))
+
+
+@main.command("eval")
+@click.argument("target", type=click.Path(exists=True))
+@click.option("--episodes", type=click.IntRange(min=1), default=200, show_default=True)
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Env seed (fire layouts).")
+@click.option("--envs", type=click.IntRange(min=1), default=None, help="Envs run together (default: train.eval_envs).")
+@click.option("--checkpoint", "which", type=click.Choice(["best_objective", "best_reward", "latest"]),
+              default="best_objective", show_default=True, help="Which checkpoint of a run folder.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="Folder for episodes.csv, summary.json, plots (default: RUN/eval).")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
+              help="Write {episodes, success_rate, failure_rates, tte} here.")
+@click.option("--frames", "frames_dir", type=click.Path(file_okay=False), default=None,
+              help="PNG frames of env 0's first episode.")
+@click.option("--gif", "gif_path", type=click.Path(dir_okay=False), default=None, help="GIF of env 0's first episode.")
+@click.option("--save-buffer", nargs=2, type=(click.IntRange(min=1), click.Path(dir_okay=False)), default=None,
+              metavar="N FILE", help="Instead: record N transitions of the deterministic policy (an IQL dataset).")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@SETS
+@ARCH
+@THREADS
+def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, frames_dir, gif_path, save_buffer, quiet, sets,
+             arch, threads):
+    """Evaluate a trained FlyAgent (a run folder or a checkpoint file) with deterministic actions.
+
+    Prints a thesis-style table (success rate with its Wilson interval, failure reasons, TTE mean ± std
+    (median)); --set changes the evaluation setting (e.g. --set ignition.fire_percentage=0.05).
+    """
+    from roshan import evaluate as ev
+    from roshan import report
+    from roshan.runtime import init_taichi
+
+    try:
+        init_taichi(arch or "cpu", threads)
+        if save_buffer is not None:
+            n, path = save_buffer
+            click.echo(ev.save_buffer(target, n, Path(path), seed=seed, num_envs=envs, which=which, overrides=sets,
+                                      progress_bar=not quiet))
+            return
+        summary = ev.evaluate_run(target, episodes=episodes, seed=seed, num_envs=envs,
+                                  out_dir=Path(out_dir) if out_dir else None,
+                                  json_path=Path(json_path) if json_path else None,
+                                  frames_dir=Path(frames_dir) if frames_dir else None,
+                                  gif_path=Path(gif_path) if gif_path else None, which=which,
+                                  progress_bar=not quiet, overrides=sets)
+    except (ConfigError, MapError, ValueError, FileNotFoundError) as exc:
+        _fail(exc)
+    click.echo(report.format_table(summary, f"{target} ({Path(summary['checkpoint']).stem}, seed {seed})"))
+    click.echo(f"files: {summary['out_dir']}")
+
+
 # ------------------------------------------------------------------------------------------------ bench
 
 

@@ -169,6 +169,14 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
     return from_dict(cls, data, where=where)
 
 
+def apply_overrides(cfg, overrides: list[str] | tuple[str, ...], where: str = "--set"):
+    """A copy of the config ``cfg`` with ``section.key=value`` overrides applied and validated."""
+    data = to_dict(cfg)
+    for item in overrides:
+        _apply_override(data, item, type(cfg))
+    return from_dict(type(cfg), data, where=where)
+
+
 def from_dict(cls: type, data: dict, where: str = "config", prefix: str = ""):
     """Build dataclass ``cls`` from a nested dict; unknown keys, wrong types and out-of-range values raise."""
     if not isinstance(data, dict):

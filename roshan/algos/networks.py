@@ -5,6 +5,7 @@ Observations arrive as the env's dict: ``agent`` (B, T, 9), ``neighbors`` (B, T,
 T frame embeddings are concatenated (no recurrence), giving 64 * T = 192 features for T = 3.
 """
 
+import copy
 import math
 
 import torch
@@ -39,9 +40,13 @@ class SimpleEncoder(nn.Module):
         self.out_features = hidden * frames
 
     def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        return self.encode_frames(obs).flatten(-2)
+
+    def encode_frames(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        """Per-frame embeddings (..., T, 64); frames never mix, so a frame can be encoded on its own."""
         a = obs["agent"]
         v, dg = a[..., 1:3], a[..., 3:5]
-        return self.net(torch.cat([v, dg - v], dim=-1)).flatten(-2)
+        return self.net(torch.cat([v, dg - v], dim=-1))
 
 
 class CollisionEncoder(nn.Module):
@@ -57,8 +62,12 @@ class CollisionEncoder(nn.Module):
         self.out_features = embed * frames
 
     def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        return self.encode_frames(obs).flatten(-2)
+
+    def encode_frames(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        """Per-frame embeddings (..., T, 64); frames never mix, so a frame can be encoded on its own."""
         mask = obs["neighbors_mask"] > 0.5  # (B, T, K)
-        h = self.neighbour(obs["neighbors"]) * mask.unsqueeze(-1)  # invalid slots are zeroed
+        h = self.encode_neighbours(obs["neighbors"], mask)
         scores = self.score(h).squeeze(-1).masked_fill(~mask, float("-inf"))
         any_valid = mask.any(dim=-1, keepdim=True)
         # softmax over valid slots only; a frame without any valid slot pools to zeros (not NaN)
@@ -67,7 +76,19 @@ class CollisionEncoder(nn.Module):
         pooled = pooled * any_valid  # LayerNorm of a zero vector is its bias: keep "no neighbour" at zero
         no_neighbour = (~any_valid).float()
         x = torch.cat([self.own(obs["agent"]), pooled, no_neighbour], dim=-1)
-        return self.fusion(x).flatten(-2)
+        return self.fusion(x)
+
+    def encode_neighbours(self, neighbours: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        """h_k (B, T, K, embed), zero for invalid slots. Only valid slots go through the MLP: the branch is two
+        thirds of the encoder's arithmetic and most slots are empty when drones are spread out, so gathering
+        them is the same function (an invalid slot's output is discarded either way) at a fraction of the cost."""
+        n_valid = int(mask.sum())
+        if n_valid == mask.numel():
+            return self.neighbour(neighbours)
+        h = neighbours.new_zeros((*mask.shape, self.norm.normalized_shape[0]))
+        if n_valid:
+            h = h.index_put((mask,), self.neighbour(neighbours[mask]))
+        return h
 
 
 def make_encoder(collision: bool, frames: int = 3) -> nn.Module:
@@ -100,7 +121,131 @@ class ActorCritic(nn.Module):
         enc = self.critic_encoder if self.critic_encoder is not None else self.encoder
         return self.value(enc(obs)).squeeze(-1)
 
+    def forward(self, obs: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Mean (B, 2), std (2,) and value (B,); a shared encoder runs once for both heads."""
+        return self.from_frames(*self.encode_frames(obs))
+
+    def encode_frames(self, obs: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """Per-frame embeddings (..., T, 64) of the actor's encoder and of the critic's own (None if shared)."""
+        za = self.encoder.encode_frames(obs)
+        return za, (None if self.critic_encoder is None else self.critic_encoder.encode_frames(obs))
+
+    def from_frames(self, za: torch.Tensor, zc: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor,
+                                                                                torch.Tensor]:
+        """The heads on per-frame embeddings (..., T, 64), concatenated in frame order."""
+        z = za.flatten(-2)
+        mu = self.mu(z)
+        mean = torch.tanh(mu) if self.tanh_mean else mu
+        value = self.value(z if zc is None else zc.flatten(-2)).squeeze(-1)
+        return mean, self.log_std.exp(), value
+
 
 def flatten_drones(obs: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
     """(E, N, ...) env observations as a (E * N, ...) batch: the shared policy sees drones as samples."""
     return {k: v.flatten(0, 1) for k, v in obs.items()}
+
+
+# ---------------------------------------------------------------------------------------------- off-policy heads
+
+
+def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
+    """Polyak averaging ``target <- tau * source + (1 - tau) * target`` over matching parameters."""
+    with torch.no_grad():
+        for t, s in zip(target.parameters(), source.parameters(), strict=True):
+            t.lerp_(s, tau)
+
+
+def to_device(obs: dict[str, torch.Tensor], device: torch.device) -> dict[str, torch.Tensor]:
+    """The observation dict with every tensor on ``device`` (no copy when it is already there)."""
+    return {k: v.to(device) for k, v in obs.items()}
+
+
+def check_meta(saved: dict | None, expected: dict) -> None:
+    """Raise a ValueError naming every mismatching field between a checkpoint's ``meta`` and this learner's."""
+    if saved is None:
+        raise ValueError(f"checkpoint has no 'meta' entry; expected one for {expected}")
+    diff = [f"{k}: checkpoint {saved.get(k)!r}, this run {v!r}" for k, v in expected.items() if saved.get(k) != v]
+    if diff:
+        raise ValueError("checkpoint made for another configuration (" + "; ".join(diff) + ")")
+
+
+def frozen_copy(net: nn.Module) -> nn.Module:
+    """A deep copy for use as a target network: no gradients, eval mode (learning.md 7)."""
+    target = copy.deepcopy(net)
+    target.requires_grad_(False)
+    return target.eval()
+
+
+def _head(sizes: list[int], gain: float) -> nn.Sequential:
+    """ReLU hidden layers (gain sqrt 2) and a linear output layer with its own ``gain`` (learning.md 1)."""
+    return nn.Sequential(*mlp(sizes[:-1]), layer_init(nn.Linear(sizes[-2], sizes[-1]), gain=gain))
+
+
+class DeterministicActor(nn.Module):
+    """TD3 actor mu(s) = tanh(MLP 400-300-2 on the encoding) (learning.md 2.3): (obs dict) -> (B, 2) in [-1, 1]."""
+
+    def __init__(self, collision: bool, frames: int = 3):
+        super().__init__()
+        self.encoder = make_encoder(collision, frames)
+        self.net = _head([self.encoder.out_features, 400, 300, 2], gain=0.1)
+
+    def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        return torch.tanh(self.net(self.encoder(obs)))
+
+
+class MeanActor(nn.Module):
+    """IQL actor: the mean head Linear(192, 2) (gain 0.1) on an encoder, (obs dict) -> raw mean mu (B, 2).
+
+    The std is fixed by the algorithm (IQL: exp(-3)), so there is no ``log_std`` parameter.
+    """
+
+    def __init__(self, collision: bool, frames: int = 3):
+        super().__init__()
+        self.encoder = make_encoder(collision, frames)
+        self.mu = layer_init(nn.Linear(self.encoder.out_features, 2), gain=0.1)
+
+    def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        return self.mu(self.encoder(obs))
+
+
+class TwinQ(nn.Module):
+    """Two Q heads Q_i(s, a) = MLP 256-256-1 on [encoder_i(s), a] (learning.md 2.3).
+
+    ``encoder`` given: both heads read that (shared, e.g. the actor's) encoder object, and it is encoded once.
+    Otherwise each head owns its encoder.
+    """
+
+    def __init__(self, collision: bool, frames: int = 3, encoder: nn.Module | None = None):
+        super().__init__()
+        self.encoder1 = encoder if encoder is not None else make_encoder(collision, frames)
+        self.encoder2 = encoder if encoder is not None else make_encoder(collision, frames)
+        width = self.encoder1.out_features + 2
+        self.q1 = _head([width, 256, 256, 1], gain=1.0)
+        self.q2 = _head([width, 256, 256, 1], gain=1.0)
+
+    def forward(self, obs: dict[str, torch.Tensor], actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(obs dict, actions (B, 2)) -> (Q1, Q2), each (B,)."""
+        h1 = self.encoder1(obs)
+        h2 = h1 if self.encoder2 is self.encoder1 else self.encoder2(obs)
+        q1 = self.q1(torch.cat([h1, actions], dim=-1)).squeeze(-1)
+        q2 = self.q2(torch.cat([h2, actions], dim=-1)).squeeze(-1)
+        return q1, q2
+
+    def q1_value(self, obs: dict[str, torch.Tensor], actions: torch.Tensor) -> torch.Tensor:
+        """Q1 alone, (B,): the TD3 actor loss needs only the first head."""
+        return self.q1(torch.cat([self.encoder1(obs), actions], dim=-1)).squeeze(-1)
+
+
+class ValueNet(nn.Module):
+    """IQL state value V(s) = MLP 256-256-1 on an encoder (learning.md 2.3): (obs dict) -> (B,).
+
+    ``encoder`` given: read that (shared) encoder object; otherwise own one.
+    """
+
+    def __init__(self, collision: bool, frames: int = 3, encoder: nn.Module | None = None):
+        super().__init__()
+        self.encoder = encoder if encoder is not None else make_encoder(collision, frames)
+        self.net = _head([self.encoder.out_features, 256, 256, 1], gain=1.0)
+
+    def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        return self.net(self.encoder(obs)).squeeze(-1)

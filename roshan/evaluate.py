@@ -1,0 +1,183 @@
+"""Evaluation: deterministic episodes of a trained FlyAgent -> success, failure reasons, TTE; CSV, JSON, plots.
+
+Episodes are spread over E envs; each env runs ``ceil(n / E)`` whole episodes and the first n of them (in env
+order) are kept, so short episodes are not over-represented the way "stop at the n-th finished episode" would.
+The env seed makes an evaluation repeatable: the same seed gives the same fire layouts and wind.
+"""
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from roshan import report
+from roshan.algos.networks import flatten_drones
+from roshan.config import apply_overrides
+from roshan.env.fly import EPISODE_FIELDS, REASONS, FlyVectorEnv
+from roshan.run import config_of_checkpoint, load_checkpoint, resolve_checkpoint
+from roshan.runtime import ensure_taichi, torch_device
+
+
+def load_agent(target: str | Path, which: str = "best_objective"):
+    """(config, agent, checkpoint path) of a run folder or a checkpoint file."""
+    from roshan.train import make_agent
+
+    path = resolve_checkpoint(target, which)
+    state = load_checkpoint(path)
+    cfg = config_of_checkpoint(state, str(path))
+    ensure_taichi()
+    agent = make_agent(cfg, torch_device())
+    agent.load_state_dict(state["agent"], weights_only=True)
+    return cfg, agent, path
+
+
+def policy_fn(agent):
+    """Deterministic actions (B, 2) from a batch of drone observations, whatever the algorithm."""
+    from roshan.algos.ppo import PPO
+
+    if isinstance(agent, PPO):
+        return lambda obs: agent.act(obs, deterministic=True)[0]
+    return lambda obs: agent.act(obs)
+
+
+@torch.no_grad()
+def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: Path | None = None,
+                 progress_bar: bool = False, on_step=None) -> dict[str, np.ndarray]:
+    """Run ``episodes`` whole episodes with ``act(obs_batch) -> actions`` and return their records.
+
+    Returns a dict of arrays: reward, time, success, reason (str), burned, extinguished, env, index.
+    ``on_step(obs, actions, rewards, terms, truncs, info)`` is called after every step (buffer recording).
+    """
+    E, N = env.num_envs, env.num_drones
+    quota = math.ceil(episodes / E)
+    obs, _ = env.reset(seed=seed)
+    done_count = torch.zeros(E, dtype=torch.long)
+    rows: list[list] = [[] for _ in range(E)]
+    frame = 0
+    from tqdm import tqdm
+
+    bar = tqdm(total=quota * E, unit="episode", disable=not progress_bar, desc="eval")
+    while int(done_count.min()) < quota:
+        actions = act(flatten_drones(obs)).view(E, N, 2)
+        obs, rewards, terms, truncs, info = env.step(actions)
+        if on_step is not None:
+            on_step(obs, actions, rewards, terms, truncs, info)
+        if frames_dir is not None and int(done_count[0]) == 0:
+            _save_frame(env, frames_dir, frame)
+            frame += 1
+        ended = info["_episode_stats"]
+        if bool(ended.any()):
+            stats = torch.stack([info["episode_stats"][k] for k in EPISODE_FIELDS], dim=-1).cpu().numpy()
+            for e in ended.nonzero().flatten().tolist():
+                if done_count[e] < quota:
+                    rows[e].append(stats[e])
+                    done_count[e] += 1
+                    bar.update(1)
+    bar.close()
+    kept = [(e, i, r) for e in range(E) for i, r in enumerate(rows[e])][:episodes]
+    col = lambda name: np.array([r[EPISODE_FIELDS.index(name)] for _, _, r in kept])  # noqa: E731
+    return {"reward": col("return"), "time": col("steps").astype(int), "success": col("success").astype(int),
+            "reason": np.array([REASONS[int(v)] for v in col("reason")]), "burned": col("burned_fraction"),
+            "extinguished": col("extinguished").astype(int), "env": np.array([e for e, _, _ in kept]),
+            "index": np.array([i for _, i, _ in kept])}
+
+
+def _save_frame(env: FlyVectorEnv, frames_dir: Path, k: int) -> None:
+    from PIL import Image
+
+    frames_dir.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(env.render()).save(frames_dir / f"frame_{k:05d}.png")
+
+
+def write_outputs(episodes: dict, out_dir: Path, title: str) -> dict:
+    """episodes.csv, summary.json and the plots in ``out_dir``; returns the summary."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    summary = report.summarize(episodes)
+    report.write_episodes_csv(episodes, out_dir / "episodes.csv")
+    report.write_summary_json(summary, out_dir / "summary.json")
+    report.plot_episodes(episodes, out_dir)
+    (out_dir / "table.txt").write_text(report.format_table(summary, title) + "\n")
+    return summary
+
+
+def flyagent_json(summary: dict) -> dict:
+    """The issue's eval JSON: episodes, success_rate, failure_rates (collision, boundary, timeout), tte."""
+    fr = summary["failure_rates"]
+    return {"episodes": summary["episodes"], "success_rate": summary["success_rate"],
+            "failure_rates": {k: fr.get(k, 0.0) for k in ("collision", "boundary", "timeout")},
+            "tte": {k: summary["tte"][k] for k in ("mean", "std", "median")}}
+
+
+def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_envs: int | None = None,
+                 out_dir: Path | None = None, json_path: Path | None = None, frames_dir: Path | None = None,
+                 gif_path: Path | None = None, which: str = "best_objective", progress_bar: bool = True,
+                 overrides: list[str] | tuple[str, ...] = ()) -> dict:
+    """Evaluate a run folder or checkpoint with deterministic actions; files go to ``out_dir`` (default
+    ``<run>/eval``). ``overrides`` (``section.key=value``) change the evaluation setting, not the network.
+    Returns the summary dict of :func:`roshan.report.summarize` plus ``checkpoint`` and ``out_dir``."""
+    cfg, agent, path = load_agent(target, which)
+    cfg = apply_overrides(cfg, overrides) if overrides else cfg
+    E = max(1, min(num_envs or cfg.train.eval_envs, episodes))
+    env = FlyVectorEnv(num_envs=E, config=cfg.env_config(), fly=cfg.fly, seed=seed)
+    if gif_path is not None and frames_dir is None:
+        frames_dir = Path(gif_path).with_suffix("") / "frames"
+    eps = run_episodes(env, policy_fn(agent), episodes, seed, frames_dir, progress_bar)
+    env.close()
+    run_dir = path.parent.parent if path.parent.name == "checkpoints" else path.parent
+    out = Path(out_dir) if out_dir else run_dir / "eval"
+    summary = write_outputs(eps, out, f"{run_dir.name} ({path.stem}, {len(eps['reward'])} episodes, seed {seed})")
+    tb = run_dir / "tb"
+    if tb.is_dir():
+        scalars = report.read_tensorboard_scalars(tb)
+        if scalars:
+            report.plot_learning_curves(scalars, out / "learning_curves.png")
+    if json_path is not None:
+        Path(json_path).parent.mkdir(parents=True, exist_ok=True)
+        Path(json_path).write_text(json.dumps(flyagent_json(summary), indent=2) + "\n")
+    if gif_path is not None:
+        from roshan.kernels.render import write_gif
+
+        write_gif(sorted(Path(frames_dir).glob("frame_*.png")), Path(gif_path))
+    summary["checkpoint"], summary["out_dir"] = str(path), str(out)
+    return summary
+
+
+@torch.no_grad()
+def save_buffer(target: str | Path, transitions: int, path: Path, seed: int = 0, num_envs: int | None = None,
+                which: str = "best_objective", overrides: list[str] | tuple[str, ...] = (),
+                progress_bar: bool = True) -> str:
+    """Record ``transitions`` (drone transitions) of the deterministic policy into a replay buffer file (the IQL
+    dataset of learning.md 8: raw rewards, per-drone not_done, next observations; the env's ``final_obs`` is
+    the next observation where an episode ended, and only a real terminal sets not_done = 0)."""
+    from tqdm import tqdm
+
+    from roshan.algos.buffers import ReplayBuffer
+
+    cfg, agent, _ = load_agent(target, which)
+    cfg = apply_overrides(cfg, overrides) if overrides else cfg
+    E = num_envs or cfg.train.eval_envs
+    env = FlyVectorEnv(num_envs=E, config=cfg.env_config(), fly=cfg.fly, seed=seed)
+    N = env.num_drones
+    obs, _ = env.reset(seed=seed)
+    shapes = {k: tuple(v.shape[2:]) for k, v in obs.items()}
+    buf = ReplayBuffer(transitions, shapes, device=env.device)
+    act = policy_fn(agent)
+    bar = tqdm(total=transitions, unit="transition", disable=not progress_bar, desc="buffer")
+    while len(buf) < transitions:
+        o = {k: v.clone() for k, v in flatten_drones(obs).items()}
+        actions = act(o)
+        obs, rewards, terms, truncs, info = env.step(actions.view(E, N, 2))
+        ended = (terms | truncs).repeat_interleave(N)
+        nxt = {k: torch.where(ended.view(-1, *[1] * (v.dim() - 1)), f, v)
+               for (k, v), f in zip(flatten_drones(obs).items(), flatten_drones(info["final_obs"]).values(),
+                                    strict=True)}
+        take = min(E * N, transitions - len(buf))
+        not_done = (~terms).repeat_interleave(N).float()
+        buf.add({k: v[:take] for k, v in o.items()}, actions[:take], rewards.flatten()[:take], not_done[:take],
+                {k: v[:take] for k, v in nxt.items()})
+        bar.update(take)
+    bar.close()
+    buf.save(path)
+    return f"wrote {len(buf)} transitions to {path}"

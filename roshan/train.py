@@ -1,0 +1,400 @@
+"""The training loop: a FlyAgent vector env, an algorithm, TensorBoard, checkpoints, resume and evaluation.
+
+One *iteration* collects data and updates once (PPO: a rollout of ``horizon`` transitions, then k epochs;
+TD3: a few env steps, each followed by an update; IQL: one offline pass over the dataset). After every
+iteration the loop logs, writes ``latest`` (and ``best_*`` when their metric ties or improves) and checks the
+budget. A killed run resumes from ``latest`` with its counters, optimisers, reward scaler and RNG states.
+"""
+
+import collections
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from roshan.algos.networks import flatten_drones
+from roshan.algos.ppo import PPO, FrameCache, Rollout
+from roshan.config import dump_config
+from roshan.env.fly import EPISODE_FIELDS, REASONS, FlyVectorEnv
+from roshan.run import (
+    RunConfig,
+    check_same_model,
+    checkpoint_path,
+    config_dict,
+    config_of_checkpoint,
+    load_checkpoint,
+    new_run_dir,
+    save_checkpoint,
+)
+from roshan.runtime import ensure_taichi, init_taichi
+
+FAILURES = ("collision", "boundary", "timeout")
+
+
+def make_env(cfg: RunConfig, num_envs: int, seed: int) -> FlyVectorEnv:
+    return FlyVectorEnv(num_envs=num_envs, config=cfg.env_config(), fly=cfg.fly, seed=seed)
+
+
+def make_agent(cfg: RunConfig, device: str | torch.device = "cpu"):
+    """The algorithm object of ``train.algo`` (PPO, TD3 or IQL) with fresh networks."""
+    collision, frames = cfg.fly.collision, cfg.fly.frames
+    if cfg.train.algo == "ppo":
+        return PPO(cfg.ppo, collision, frames, device)
+    if cfg.train.algo == "td3":
+        from roshan.algos.td3 import TD3
+
+        return TD3(cfg.td3, collision, frames, device)
+    from roshan.algos.iql import IQL
+
+    return IQL(cfg.iql, collision, frames, device)
+
+
+# ------------------------------------------------------------------------------------------------ episodes
+
+
+@dataclass
+class EpisodeLog:
+    """Training episodes: the success window behind the objective, and what ended since the last write."""
+
+    window: int = 100
+    episodes: int = 0
+    recent: collections.deque = field(default_factory=collections.deque)
+    pending: list = field(default_factory=list)  # rows of EPISODE_FIELDS since the last write
+
+    def add(self, rows: np.ndarray) -> None:
+        for row in rows:
+            self.recent.append(float(row[0]))
+            if len(self.recent) > self.window:
+                self.recent.popleft()
+        self.episodes += len(rows)
+        self.pending.extend(rows.tolist())
+
+    @property
+    def objective(self) -> float:
+        """Success rate over the last ``window`` training episodes; 0 until that many exist (learning.md 9)."""
+        return float(np.mean(self.recent)) if len(self.recent) >= self.window else 0.0
+
+    @property
+    def success_so_far(self) -> float:
+        return float(np.mean(self.recent)) if self.recent else float("nan")
+
+    def drain(self) -> dict[str, float]:
+        """Means over the episodes since the last call (empty dict if none ended)."""
+        if not self.pending:
+            return {}
+        rows = np.asarray(self.pending)
+        self.pending = []
+        reasons = rows[:, EPISODE_FIELDS.index("reason")].astype(int)
+        out = {"success": rows[:, 0].mean(), "steps": rows[:, EPISODE_FIELDS.index("steps")].mean(),
+               "return": rows[:, EPISODE_FIELDS.index("return")].mean(), "count": float(len(rows))}
+        for name in FAILURES:
+            out[f"{name}_rate"] = float((reasons == REASONS.index(name)).mean())
+        return out
+
+    def state_dict(self) -> dict:
+        return {"window": self.window, "episodes": self.episodes, "recent": list(self.recent)}
+
+    def load_state_dict(self, s: dict) -> None:
+        self.window, self.episodes, self.recent = s["window"], s["episodes"], collections.deque(s["recent"])
+
+
+def ended_rows(ended: torch.Tensor, stats: torch.Tensor) -> np.ndarray:
+    """Episode records [n, len(EPISODE_FIELDS)] of the (t, env) entries flagged in ``ended`` [T, E]."""
+    return stats[ended].cpu().numpy()
+
+
+# ------------------------------------------------------------------------------------------------ PPO
+
+
+class PPOCollector:
+    """Rollout storage allocated once, filled by stepping the env with the current policy."""
+
+    def __init__(self, env: FlyVectorEnv, agent: PPO, steps: int):
+        self.env, self.agent, self.T = env, agent, steps
+        E, N = env.num_envs, env.num_drones
+        B = E * N
+        obs, _ = env.reset()
+        self.obs = obs
+        dev = env.device
+        self.buf_obs = {k: torch.zeros((steps, B, *v.shape[2:]), device=dev) for k, v in obs.items()}
+        z = lambda *s, dt=torch.float32: torch.zeros(s, dtype=dt, device=dev)  # noqa: E731
+        self.actions, self.log_probs, self.values = z(steps, B, 2), z(steps, B), z(steps, B)
+        self.rewards, self.trunc_values = z(steps, B), z(steps, B)
+        self.term, self.trunc = z(steps, B, dt=torch.bool), z(steps, B, dt=torch.bool)
+        self.ended = z(steps, E, dt=torch.bool)
+        self.stats = z(steps, E, len(EPISODE_FIELDS))
+        self.cache = FrameCache()
+        self.restarted = z(B, dt=torch.bool)
+
+    def reset(self, seed: int) -> None:
+        self.obs, _ = self.env.reset(seed=seed)
+
+    def collect(self) -> Rollout:
+        env, agent, N = self.env, self.agent, self.env.num_drones
+        bootstrap = agent.cfg.bootstrap_truncated
+        self.trunc_values.zero_()
+        self.cache.clear()  # the parameters changed in the last update
+        for t in range(self.T):
+            o = flatten_drones(self.obs)
+            a, logp, v = agent.act(o, cache=self.cache, restarted=self.restarted)
+            for k, x in o.items():
+                self.buf_obs[k][t].copy_(x)
+            self.actions[t], self.log_probs[t], self.values[t] = a, logp, v
+            self.obs, r, term, trunc, info = env.step(a.view(env.num_envs, N, 2))
+            self.rewards[t] = r.flatten()
+            self.term[t] = term.repeat_interleave(N)
+            self.trunc[t] = trunc.repeat_interleave(N)
+            ended = info["_episode_stats"]
+            self.ended[t] = ended
+            self.restarted = ended.repeat_interleave(N)
+            if bool(ended.any()):
+                self.stats[t] = torch.stack([info["episode_stats"][k] for k in EPISODE_FIELDS], dim=-1)
+                if bootstrap and bool(trunc.any()):
+                    self.trunc_values[t] = agent.value(flatten_drones(info["final_obs"]))
+        last = agent.value(flatten_drones(self.obs))
+        next_values = torch.cat([self.values[1:], last.unsqueeze(0)])
+        next_values = torch.where(self.trunc, self.trunc_values, next_values)
+        return Rollout(self.buf_obs, self.actions, self.log_probs, self.values, next_values, self.rewards,
+                       self.term, self.trunc)
+
+
+def rollout_steps(cfg: RunConfig) -> int:
+    """Env steps per PPO rollout: ``horizon`` transitions spread over envs x drones."""
+    per_step = cfg.train.num_envs * cfg.drones.num_drones
+    steps = cfg.ppo.horizon // per_step
+    if steps < 1 or steps * per_step != cfg.ppo.horizon:
+        raise ValueError(f"ppo.horizon = {cfg.ppo.horizon} must be a positive multiple of train.num_envs x "
+                         f"drones.num_drones = {per_step}")
+    return steps
+
+
+# ------------------------------------------------------------------------------------------------ the loop
+
+
+@dataclass
+class Progress:
+    """Counters saved with every checkpoint."""
+
+    updates: int = 0
+    env_steps: int = 0
+    seconds: float = 0.0
+    best_reward: float = -math.inf
+    best_objective: float = -math.inf
+
+    def state_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+class Trainer:
+    """One training run in ``run_dir`` (new or resumed)."""
+
+    def __init__(self, cfg: RunConfig, run_dir: Path, resume_state: dict | None = None, progress_bar: bool = True,
+                 on_update: Callable[[dict], None] | None = None):
+        self.cfg, self.run_dir = cfg, Path(run_dir)
+        self.progress_bar, self.on_update = progress_bar, on_update
+        tc = cfg.train
+        if tc.algo != "ppo":
+            raise NotImplementedError(f"train.algo = {tc.algo!r}: use roshan.train.train(), which dispatches")
+        self.steps_per_rollout = rollout_steps(cfg)
+        self.generator = torch.Generator().manual_seed(tc.seed)
+        torch.manual_seed(tc.seed)
+        self.agent = make_agent(cfg)
+        self.progress = Progress()
+        self.episodes = EpisodeLog(window=tc.objective_window)
+        if resume_state is not None:
+            self._restore(resume_state)
+        # A resumed run starts fresh episodes from a seed that depends on where it stopped.
+        self.env = make_env(cfg, tc.num_envs, seed=tc.seed + 7919 * self.progress.updates)
+        self.collector = PPOCollector(self.env, self.agent, self.steps_per_rollout)
+        from torch.utils.tensorboard import SummaryWriter
+
+        self.writer = SummaryWriter(str(self.run_dir / "tb"), purge_step=self.progress.env_steps or None)
+
+    def _restore(self, state: dict) -> None:
+        self.agent.load_state_dict(state["agent"])
+        for k, v in state["progress"].items():
+            setattr(self.progress, k, v)
+        self.episodes.load_state_dict(state["episodes"])
+        self.generator.set_state(state["rng"]["generator"])
+        torch.set_rng_state(state["rng"]["torch"])
+        np.random.set_state(state["rng"]["numpy"])
+
+    def state_dict(self) -> dict:
+        return {"algo": self.cfg.train.algo, "config": config_dict(self.cfg), "agent": self.agent.state_dict(),
+                "progress": self.progress.state_dict(), "episodes": self.episodes.state_dict(),
+                "rng": {"generator": self.generator.get_state(), "torch": torch.get_rng_state(),
+                        "numpy": np.random.get_state()}}
+
+    # ------------------------------------------------------------------------------------------ budget
+
+    def done(self) -> bool:
+        tc, p = self.cfg.train, self.progress
+        return ((tc.total_steps > 0 and p.env_steps >= tc.total_steps)
+                or (tc.max_updates > 0 and p.updates >= tc.max_updates)
+                or (tc.max_minutes > 0 and p.seconds >= 60.0 * tc.max_minutes))
+
+    def _bar(self):
+        from tqdm import tqdm
+
+        total = self.cfg.train.total_steps or None
+        return tqdm(total=total, initial=self.progress.env_steps, unit="step", dynamic_ncols=True,
+                    disable=not self.progress_bar, desc=self.run_dir.name)
+
+    # ------------------------------------------------------------------------------------------ run
+
+    def run(self) -> Progress:
+        bar = self._bar()
+        try:
+            while not self.done():
+                t0 = time.perf_counter()
+                rollout = self.collector.collect()
+                metrics = self.agent.update(rollout, self.generator)
+                self.episodes.add(ended_rows(self.collector.ended, self.collector.stats))
+                steps = self.steps_per_rollout * self.env.num_envs
+                dt = time.perf_counter() - t0
+                p = self.progress
+                p.updates, p.env_steps, p.seconds = p.updates + 1, p.env_steps + steps, p.seconds + dt
+                metrics["steps_per_s"] = steps / dt
+                self._log(metrics)
+                self._checkpoint(metrics["rewards_raw"])
+                bar.update(steps)
+                bar.set_postfix(sps=f"{steps / dt:,.0f}", success=f"{self.episodes.success_so_far:.2f}",
+                                R=f"{metrics['rewards_raw']:+.3f}", refresh=False)
+                if self.on_update is not None:
+                    self.on_update({"updates": p.updates, "env_steps": p.env_steps,
+                                    "objective": self.episodes.objective, "reward": metrics["rewards_raw"]})
+        finally:
+            bar.close()
+            self.writer.flush()
+        return self.progress
+
+    def _log(self, m: dict) -> None:
+        w, step = self.writer, self.progress.env_steps
+        tags = {"Rewards/Rewards_Raw": "rewards_raw", "Rewards/Rewards_norm": "rewards_scaled",
+                "Rewards/Returns": "returns", "Rewards/Advantages": "advantages", "Rewards/Values": "values",
+                "Training/Approx_KL": "approx_kl", "Training/Clip_Fraction": "clip_fraction",
+                "Training/actor_loss": "actor_loss", "Training/value_loss": "value_loss",
+                "Training/entropy_loss": "entropy", "Training/log_std": "std", "Training/LR": "lr",
+                "Sanitylogs/Explained_Variance": "explained_variance", "Perf/steps_per_s": "steps_per_s"}
+        for tag, key in tags.items():
+            if key in m and m[key] == m[key]:
+                w.add_scalar(tag, m[key], step)
+        ep = self.episodes.drain()
+        if ep:
+            w.add_scalar("Episodes/success_rate", ep["success"], step)
+            w.add_scalar("Episodes/return", ep["return"], step)
+            w.add_scalar("Sanitylogs/Episode_Steps", ep["steps"], step)
+            for name in FAILURES:
+                w.add_scalar(f"Episodes/{name}_rate", ep[f"{name}_rate"], step)
+        if len(self.episodes.recent) >= self.episodes.window:
+            w.add_scalar("Training/Objective", self.episodes.objective, step)
+
+    def _checkpoint(self, batch_reward: float) -> None:
+        """latest always; best_reward / best_objective when the metric ties or improves (learning.md 9)."""
+        p, state = self.progress, self.state_dict()
+        save_checkpoint(state, checkpoint_path(self.run_dir, "latest"))
+        if batch_reward >= p.best_reward:
+            p.best_reward = batch_reward
+            save_checkpoint(self.state_dict(), checkpoint_path(self.run_dir, "best_reward"))
+        objective = self.episodes.objective
+        if objective >= p.best_objective:
+            p.best_objective = objective
+            save_checkpoint(self.state_dict(), checkpoint_path(self.run_dir, "best_objective"))
+        if state["progress"] != p.state_dict():  # the bests changed after latest was written
+            save_checkpoint(self.state_dict(), checkpoint_path(self.run_dir, "latest"))
+
+
+# ------------------------------------------------------------------------------------------------ entry points
+
+
+def start_run(cfg: RunConfig, root: str | Path = "runs", name: str | None = None) -> Path:
+    """Create the run folder and write the resolved config."""
+    run_dir = new_run_dir(root, name or f"{cfg.train.algo}_{time.strftime('%Y%m%d-%H%M%S')}")
+    dump_config(cfg, run_dir / "config.yaml")
+    return run_dir
+
+
+def resume_state(run_dir: Path, cfg: RunConfig) -> dict | None:
+    """The ``latest`` checkpoint of ``run_dir`` after checking it fits ``cfg`` (None if there is none yet)."""
+    path = checkpoint_path(run_dir, "latest")
+    if not path.is_file():
+        return None
+    state = load_checkpoint(path)
+    check_same_model(cfg, config_of_checkpoint(state, str(path)), str(path))
+    return state
+
+
+def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress_bar: bool = True,
+          on_update: Callable[[dict], None] | None = None, evaluate_at_end: bool = True) -> dict:
+    """Train one run in ``run_dir`` (continuing from its ``latest`` checkpoint if ``resume``), then evaluate
+    its ``best_objective`` checkpoint. Returns the evaluation summary plus the run's counters."""
+    ensure_taichi_for(cfg)
+    if cfg.train.torch_threads:
+        torch.set_num_threads(cfg.train.torch_threads)
+    state = resume_state(run_dir, cfg) if resume else None
+    trainer = Trainer(cfg, run_dir, state, progress_bar, on_update)
+    progress = trainer.run()
+    result = {"run_dir": str(run_dir), **progress.state_dict(), "train_episodes": trainer.episodes.episodes}
+    if evaluate_at_end:
+        from roshan.evaluate import evaluate_run
+
+        summary = evaluate_run(run_dir, episodes=cfg.train.eval_episodes, seed=cfg.train.seed + 10_000,
+                               num_envs=cfg.train.eval_envs, progress_bar=progress_bar)
+        result["eval"] = summary
+    return result
+
+
+def ensure_taichi_for(cfg: RunConfig) -> None:
+    """Initialise Taichi from ``sim.arch`` / ``sim.threads`` unless the process already did."""
+    from roshan.runtime import current_arch
+
+    if current_arch() is None:
+        init_taichi(cfg.sim.arch, cfg.sim.threads or None)
+    ensure_taichi()
+
+
+def train_auto(cfg: RunConfig, root: str | Path = "runs", name: str | None = None, progress_bar: bool = True,
+               evaluate_at_end: bool = True) -> list[dict]:
+    """``train.auto_train`` = k independent runs (seeds seed .. seed+k-1) in sequence, each evaluated; one
+    run goes straight to ``root/name``, several to ``root/name/seed_<s>``."""
+    from roshan.config import replace
+
+    k = cfg.train.auto_train
+    if k == 1:
+        return [train(cfg, start_run(cfg, root, name), progress_bar=progress_bar, evaluate_at_end=evaluate_at_end)]
+    parent = start_run(cfg, root, name)
+    results = []
+    for i in range(k):
+        seed_cfg = replace(cfg, train=replace(cfg.train, seed=cfg.train.seed + i, auto_train=1))
+        run_dir = start_run(seed_cfg, parent, f"seed_{seed_cfg.train.seed}")
+        results.append(train(seed_cfg, run_dir, progress_bar=progress_bar, evaluate_at_end=evaluate_at_end))
+    if evaluate_at_end:
+        _write_auto_summary(parent, results)
+    return results
+
+
+def _write_auto_summary(parent: Path, results: list[dict]) -> None:
+    """Per-seed success rates and their mean ± std (median), the way the thesis reports FlyAgent experiments."""
+    import json
+
+    rates = np.array([r["eval"]["success_rate"] for r in results])
+    summary = {"runs": [r["run_dir"] for r in results], "success_rates": rates.tolist(),
+               "success_mean": float(rates.mean()), "success_std": float(rates.std(ddof=1)) if len(rates) > 1 else 0.0,
+               "success_median": float(np.median(rates))}
+    (Path(parent) / "auto_train.json").write_text(json.dumps(summary, indent=2) + "\n")
+
+
+def result_lines(res: dict) -> str:
+    """A few lines about a finished run for the console."""
+    from roshan import report
+
+    mins = res["seconds"] / 60.0
+    head = (f"{res['run_dir']}: {res['updates']} updates, {res['env_steps']:,} env steps, {mins:.1f} min "
+            f"({res['env_steps'] / max(res['seconds'], 1e-9):,.0f} env-steps/s), {res['train_episodes']} episodes")
+    if "eval" not in res:
+        return head
+    return head + "\n" + report.format_table(res["eval"], f"evaluation of {Path(res['run_dir']).name}")
