@@ -1,0 +1,155 @@
+"""PPO's pieces against hand computations, and PPO learning a tiny task."""
+
+import math
+
+import pytest
+import torch
+
+from roshan.algos.normalize import RewardScaler
+from roshan.algos.ppo import PPO, PPOConfig, Rollout, approx_kl, clipped_surrogate, explained_variance
+
+
+def test_clipped_surrogate_by_hand():
+    ratio = torch.tensor([0.5, 1.0, 1.5, 0.5, 1.5])
+    adv = torch.tensor([1.0, -1.0, 1.0, -1.0, -1.0])
+    # min(r A, clip(r) A): 0.5 | -1 | 1.2 (clipped) | -0.8 (clipped: pessimistic) | -1.5
+    want = -(0.5 - 1.0 + 1.2 - 0.8 - 1.5) / 5
+    assert float(clipped_surrogate(ratio, adv, 0.2)) == pytest.approx(want)
+
+
+@pytest.mark.parametrize("estimator", ["k1", "k2"])
+def test_kl_estimators_on_known_gaussians(estimator):
+    g = torch.Generator().manual_seed(0)
+    old, new = torch.distributions.Normal(0.0, 1.0), torch.distributions.Normal(0.3, 1.2)
+    x = torch.randn(400_000, generator=g)  # samples of the old policy
+    exact = float(torch.distributions.kl_divergence(old, new))  # log(1.2) + (1 + 0.09) / 2.88 - 0.5
+    assert exact == pytest.approx(math.log(1.2) + 1.09 / 2.88 - 0.5)
+    est = float(approx_kl(old.log_prob(x), new.log_prob(x), estimator))
+    assert est == pytest.approx(exact, rel=0.03)
+
+
+def test_k2_is_never_negative_and_zero_for_equal_policies():
+    logp = torch.randn(100)
+    assert float(approx_kl(logp, logp, "k2")) == 0.0
+    assert float(approx_kl(logp, logp + 0.5 * torch.randn(100), "k2")) > 0.0
+
+
+def test_reward_scaler_divides_by_running_std_without_shift():
+    s = RewardScaler(eps=1e-8)
+    r = torch.tensor([1.0, 2.0, 3.0, 4.0])
+    s.update(r)
+    # merge of (mean 0, var 1, count 1e-4) with (mean 2.5, var 1.25, count 4)
+    n0, n = 1e-4, 4.0
+    total = n0 + n
+    mean = 2.5 * n / total
+    var = (1.0 * n0 + 1.25 * n + 2.5**2 * n0 * n / total) / total
+    assert s.mean == pytest.approx(mean) and s.var == pytest.approx(var)
+    torch.testing.assert_close(s.scale(r), r / math.sqrt(var + 1e-8))
+    assert bool((s.scale(-r) < 0).all())  # no shift: a penalty stays a penalty
+
+
+def test_explained_variance():
+    ret = torch.tensor([1.0, 2.0, 3.0, 4.0])
+    assert explained_variance(ret, ret) == 1.0
+    assert explained_variance(ret.mean().expand(4), ret) == pytest.approx(0.0)
+    assert math.isnan(explained_variance(ret, torch.ones(4)))
+
+
+# ---------------------------------------------------------------------------------------------- a tiny task
+
+
+def bandit_obs(B, g):
+    """FlyAgent-shaped observations whose goal delta (features 3-4) is the target action; velocity 0."""
+    agent = torch.zeros(B, 3, 9)
+    agent[..., 3:5] = g.unsqueeze(1)
+    return {"agent": agent, "neighbors": torch.zeros(B, 3, 4, 4), "neighbors_mask": torch.zeros(B, 3, 4)}
+
+
+def bandit_rollout(agent: PPO, T: int, B: int, g: torch.Generator) -> Rollout:
+    """One-step episodes: reward -|a - target|^2, every step terminal."""
+    targets = torch.rand(T, B, 2, generator=g) * 1.6 - 0.8
+    obs = {k: torch.stack([bandit_obs(B, targets[t])[k] for t in range(T)]) for k in ("agent", "neighbors",
+                                                                                           "neighbors_mask")}
+    acts, logps, values = [], [], []
+    for t in range(T):
+        a, lp, v = agent.act({k: v[t] for k, v in obs.items()})
+        acts.append(a)
+        logps.append(lp)
+        values.append(v)
+    actions = torch.stack(acts)
+    rewards = -(actions - targets).pow(2).sum(-1)
+    done = torch.ones(T, B, dtype=torch.bool)
+    return Rollout(obs, actions, torch.stack(logps), torch.stack(values), torch.zeros(T, B), rewards, done,
+                   torch.zeros_like(done))
+
+
+@pytest.mark.parametrize("minibatch", ["samples", "sequences"])
+def test_ppo_learns_a_contextual_bandit(minibatch):
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(1)
+    cfg = PPOConfig(lr=3e-3, horizon=8 * 128, batch_size=256, k_epochs=4, entropy_coeff=0.0,
+                    minibatch=minibatch)
+    agent = PPO(cfg, collision=False)
+    first = float(bandit_rollout(agent, 8, 128, g).rewards.mean())
+    for _ in range(40):
+        agent.update(bandit_rollout(agent, 8, 128, g), g)
+    with torch.no_grad():
+        targets = torch.rand(512, 2, generator=g) * 1.6 - 0.8
+        mean = agent.act(bandit_obs(512, targets), deterministic=True)[0]
+    err = float((mean - targets).pow(2).sum(-1).mean())
+    assert first < -1.0  # std 1 exploration around a near-zero mean
+    assert err < 0.02, f"deterministic action error {err}"
+    assert agent.updates == 40
+
+
+def test_kl_early_stop_skips_the_rest_of_each_epoch():
+    g = torch.Generator().manual_seed(0)
+    cfg = PPOConfig(horizon=4 * 64, batch_size=64, k_epochs=3, kl_early_stop=True, kl_target=1e-5, lr=1e-2)
+    agent = PPO(cfg, collision=False)
+    metrics = agent.update(bandit_rollout(agent, 4, 64, g), g)
+    # epoch 1: minibatch 1 sees KL ~ 0 (float noise only) and steps, minibatch 2 sees KL > 0 and stops the epoch;
+    # epochs 2 and 3 stop at their first minibatch: one gradient step in all.
+    assert agent.gradient_steps == 1
+    assert metrics["epochs_steps"] == 1
+
+
+def test_log_std_schedules():
+    g = torch.Generator().manual_seed(0)
+    rho = 0.9
+    agent = PPO(PPOConfig(horizon=64, batch_size=64, log_std="train_step_decay", decay_rate=rho), collision=False)
+    assert not agent.net.log_std.requires_grad
+    for k in range(3):
+        agent.update(bandit_rollout(agent, 1, 64, g), g)
+        assert float(agent.net.log_std[0]) == pytest.approx(-20.0 * (1.0 - (rho**k) ** 5))
+    agent = PPO(PPOConfig(horizon=64, batch_size=64, log_std="log_step_decay", decay_rate=rho), collision=False)
+    for k in range(3):
+        agent.update(bandit_rollout(agent, 1, 64, g), g)
+        assert float(agent.net.log_std[0]) == pytest.approx((k + 1) * math.log(rho), abs=1e-6)
+
+
+def test_gradient_clipping_bounds_each_group():
+    g = torch.Generator().manual_seed(0)
+    agent = PPO(PPOConfig(horizon=64, batch_size=64, k_epochs=1, max_grad_norm=1e-3, lr=1.0,
+                          optim=PPOConfig().optim.__class__(name="sgd", scheduler="none")), collision=False)
+    before = {n: p.detach().clone() for n, p in agent.net.named_parameters()}
+    agent.update(bandit_rollout(agent, 1, 64, g), g)
+    actor = [n for n in before if not n.startswith("value") and not n.startswith("critic_encoder")]
+    moved = torch.cat([(dict(agent.net.named_parameters())[n].detach() - before[n]).flatten() for n in actor])
+    # plain SGD with lr 1: the step is the clipped gradient, so its norm is at most the clip
+    assert float(moved.norm()) <= 1e-3 * (1 + 1e-4)
+
+
+def test_separate_optimizers_refuse_a_shared_encoder():
+    with pytest.raises(ValueError, match="share_encoder"):
+        PPO(PPOConfig(separate_optimizers=True, share_encoder=True), collision=False)
+
+
+def test_state_dict_round_trip_reproduces_actions():
+    g = torch.Generator().manual_seed(0)
+    a = PPO(PPOConfig(horizon=64, batch_size=32), collision=True)
+    a.update(bandit_rollout(a, 1, 64, g), g)
+    b = PPO(PPOConfig(horizon=64, batch_size=32), collision=True)
+    b.load_state_dict(a.state_dict())
+    obs = bandit_obs(16, torch.rand(16, 2, generator=g))
+    torch.testing.assert_close(a.act(obs, deterministic=True)[0], b.act(obs, deterministic=True)[0])
+    assert b.updates == 1 and b.scaler.count == a.scaler.count
