@@ -237,7 +237,8 @@ class PPO:
         out = {k: (sum(v) / len(v) if v else float("nan")) for k, v in stats.items()}
         out.update(rewards_raw=float(rollout.rewards.mean()), rewards_scaled=float(rewards.mean()),
                    returns=float(ret.mean()), advantages=float(adv.mean()), values=float(rollout.values.mean()),
-                   explained_variance=explained_variance(rollout.values, ret), std=float(self.net.log_std.detach().exp()[0]),
+                   explained_variance=explained_variance(rollout.values, ret),
+                   std=float(self.net.log_std.detach().exp()[0]),
                    lr=self.optimizers[0].param_groups[0]["lr"], epochs_steps=len(stats["actor_loss"]))
         return out
 
