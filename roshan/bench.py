@@ -263,6 +263,7 @@ def plot_fidelity(results: dict, path: Path) -> Path:
 
 # ---------------------------------------------------------------------------------------------- FlyAgent env
 
+CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 ORIGINAL_FLY_EVAL_STEPS_PER_S = 935  # collision FlyAgent evaluation incl. policy inference, 35x36 at 1.5 %
 
 
@@ -270,27 +271,31 @@ def time_env(envs: int, drones: int, fire_percentage: float, steps: int, policy:
              seed: int = 0) -> dict:
     """Env-steps/s of the FlyAgent vector env (complex policy, collisions on), random actions or a network.
 
-    ``policy``: None (random actions drawn in torch), "simple" or "collision" (the FlyAgent encoder + actor,
-    inference only, no grad). The first steps (kernel compilation) are not timed.
+    ``policy``: None (random actions drawn in torch), "simple" or "collision" (the FlyAgent actor sampling
+    actions, inference only, with the frame cache the trainer uses), or "simple+ppo" / "collision+ppo" (the
+    whole training iteration of configs/fly_simple.yaml / fly_collision.yaml at this E: rollouts of 16 steps and
+    the PPO update). The first steps (kernel compilation) are not timed.
     """
+    if policy is not None and policy.endswith("+ppo"):
+        return time_training(envs, drones, fire_percentage, steps, policy.split("+")[0], seed)
     import torch
 
-    from roshan.algos.networks import ActorCritic, flatten_drones
+    from roshan.algos.networks import flatten_drones
+    from roshan.algos.ppo import PPO, FrameCache, PPOConfig
     from roshan.config import DroneConfig
     from roshan.env.fly import FlyConfig, FlyVectorEnv
 
     cfg = Config(ignition=IgnitionConfig(fire_percentage=fire_percentage), drones=DroneConfig(num_drones=drones))
     env = FlyVectorEnv(envs, cfg, FlyConfig(policy="complex", collision=collision), seed=seed)
     obs, _ = env.reset(seed=seed)
-    net = None if policy is None else ActorCritic(collision=policy == "collision").eval()
+    agent = None if policy is None else PPO(PPOConfig(use_tanh_dist=True), collision=policy == "collision")
+    cache, restarted = FrameCache(), None
     gen = torch.Generator().manual_seed(seed)
 
     def act(o):
-        if net is None:
+        if agent is None:
             return torch.rand((envs, drones, 2), generator=gen) * 2 - 1
-        with torch.no_grad():
-            mean, std = net.actor(flatten_drones(o))
-            return (mean + std * torch.randn(mean.shape, generator=gen)).view(envs, drones, 2)
+        return agent.act(flatten_drones(o), cache=cache, restarted=restarted)[0].view(envs, drones, 2)
 
     for _ in range(3):
         obs, *_ = env.step(act(obs))
@@ -298,11 +303,39 @@ def time_env(envs: int, drones: int, fire_percentage: float, steps: int, policy:
     t0 = time.perf_counter()
     for _ in range(steps):
         obs, _, term, trunc, _ = env.step(act(obs))
-        ended += int((term | trunc).sum())
+        done = term | trunc
+        restarted = done.repeat_interleave(drones)
+        ended += int(done.sum())
     elapsed = time.perf_counter() - t0
     return {"envs": envs, "drones": drones, "fire_percentage": fire_percentage, "policy": policy or "random",
             "steps": steps, "seconds": elapsed, "env_steps_per_s": envs * steps / elapsed,
             "agent_steps_per_s": envs * drones * steps / elapsed, "episodes_ended": ended,
+            "memory_bytes_per_env": env.fire.memory_bytes_per_env()}
+
+
+def time_training(envs: int, drones: int, fire_percentage: float, steps: int, network: str, seed: int = 0) -> dict:
+    """Env-steps/s of PPO training (rollout + update) with the config of the given network's setting."""
+    import torch
+
+    from roshan.run import load_run_config
+    from roshan.train import PPOLearner, make_agent, make_env
+
+    name = "fly_collision" if network == "collision" else "fly_simple"
+    per_rollout = 16
+    overrides = [f"train.num_envs={envs}", f"drones.num_drones={drones}",
+                 f"ignition.fire_percentage={fire_percentage}", f"ppo.horizon={envs * drones * per_rollout}"]
+    cfg = load_run_config(CONFIGS / f"{name}.yaml", overrides)
+    env = make_env(cfg, envs, seed)
+    learner = PPOLearner(cfg, env, make_agent(cfg))
+    gen = torch.Generator().manual_seed(seed)
+    learner.iterate(gen)  # compiles
+    iterations = max(1, steps // per_rollout)
+    t0 = time.perf_counter()
+    done = sum(learner.iterate(gen)[0] for _ in range(iterations))
+    elapsed = time.perf_counter() - t0
+    return {"envs": envs, "drones": drones, "fire_percentage": fire_percentage, "policy": f"{network}+ppo",
+            "steps": done // envs, "seconds": elapsed, "env_steps_per_s": done / elapsed,
+            "agent_steps_per_s": done * drones / elapsed, "episodes_ended": None,
             "memory_bytes_per_env": env.fire.memory_bytes_per_env()}
 
 
@@ -314,7 +347,7 @@ def env_speed(env_counts=(1, 64, 256, 1024, 4096), drones: int = 4, fire_percent
         for e in env_counts:
             steps = max(20, min(max_steps, min_env_steps // e))
             for pol in policies:
-                steps_pol = steps if pol != "collision" else max(10, steps // 4)
+                steps_pol = steps if pol in (None, "simple") else max(16, steps // 4)
                 runs.append(time_env(e, drones, pct, steps_pol, pol))
     return {"threads": os.cpu_count(), "runs": runs, "original_eval_env_steps_per_s": ORIGINAL_FLY_EVAL_STEPS_PER_S}
 

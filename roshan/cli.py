@@ -194,14 +194,16 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
 @click.option("--frames", "frames_dir", type=click.Path(file_okay=False), default=None,
               help="PNG frames of env 0's first episode.")
 @click.option("--gif", "gif_path", type=click.Path(dir_okay=False), default=None, help="GIF of env 0's first episode.")
+@click.option("--baseline", type=click.Choice(["random", "greedy"]), default=None,
+              help="Also run this scripted policy on the same episodes and print both side by side.")
 @click.option("--save-buffer", nargs=2, type=(click.IntRange(min=1), click.Path(dir_okay=False)), default=None,
               metavar="N FILE", help="Instead: record N transitions of the deterministic policy (an IQL dataset).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @SETS
 @ARCH
 @THREADS
-def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, frames_dir, gif_path, save_buffer, quiet, sets,
-             arch, threads):
+def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, frames_dir, gif_path, baseline, save_buffer,
+             quiet, sets, arch, threads):
     """Evaluate a trained FlyAgent (a run folder or a checkpoint file) with deterministic actions.
 
     Prints a thesis-style table (success rate with its Wilson interval, failure reasons, TTE mean ± std
@@ -223,11 +225,111 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, frames_dir
                                   json_path=Path(json_path) if json_path else None,
                                   frames_dir=Path(frames_dir) if frames_dir else None,
                                   gif_path=Path(gif_path) if gif_path else None, which=which,
-                                  progress_bar=not quiet, overrides=sets)
+                                  progress_bar=not quiet, overrides=sets, baseline=baseline)
     except (ConfigError, MapError, ValueError, FileNotFoundError) as exc:
         _fail(exc)
-    click.echo(report.format_table(summary, f"{target} ({Path(summary['checkpoint']).stem}, seed {seed})"))
+    title = f"{target} ({Path(summary['checkpoint']).stem}, seed {seed})"
+    if baseline is not None:
+        click.echo(report.format_comparison({"policy": summary, baseline: summary["baseline"]}, title))
+    else:
+        click.echo(report.format_table(summary, title))
     click.echo(f"files: {summary['out_dir']}")
+
+
+# ------------------------------------------------------------------------------------------------ study
+
+
+class _StudyGroup(click.Group):
+    """``roshan study CONFIG ...`` means ``roshan study run CONFIG ...``; ``report`` is the other subcommand."""
+
+    def parse_args(self, ctx, args):
+        if args and args[0] not in self.commands and args[0] not in ctx.help_option_names:
+            args = ["run", *args]
+        return super().parse_args(ctx, args)
+
+
+@main.group(cls=_StudyGroup)
+def study():
+    """Optuna studies: `roshan study CONFIG --space SPACE.yaml --trials N` (= `study run`), `study report`."""
+
+
+@study.command("run")
+@click.argument("config_path", required=False, type=click.Path(dir_okay=False))
+@click.option("--space", "space_path", type=click.Path(dir_okay=False), default=None,
+              help="Search space YAML: dotted config keys -> ranges (configs/spaces/).")
+@click.option("--trials", type=click.IntRange(min=1), default=None,
+              help="Trials to finish (stored with the study; given with --resume it changes the budget).")
+@click.option("--storage", default=None,
+              help="SQLAlchemy URL (postgresql://user:password@host/db) shared by machines, or a journal file "
+                   "(default: ROOT/NAME/study.journal).")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Worker processes on this machine (one trial each at a time).")
+@click.option("--name", default=None, help="Study name (default: <config>-<space>).")
+@click.option("--root", default="runs", show_default=True, type=click.Path(file_okay=False),
+              help="Trials train in ROOT/NAME/trial_<n>/.")
+@click.option("--resume", is_flag=True, help="Continue the study (or join it from another machine).")
+@click.option("--objective", type=click.Choice(["success", "reward", "tte"]), default=None,
+              help="Evaluation success rate (default), mean reward, or time to end (minimised, no pruning).")
+@click.option("--seed", type=click.IntRange(min=0), default=None, help="TPE seed (default 42).")
+@click.option("--startup-trials", type=click.IntRange(min=0), default=None, help="Random trials before TPE (15).")
+@click.option("--prune/--no-prune", default=None, help="Median pruning on the training objective (default on).")
+@click.option("--prune-startup", type=click.IntRange(min=0), default=None, help="Trials before pruning starts (5).")
+@click.option("--prune-warmup", type=click.IntRange(min=0), default=None, help="Updates before a trial can be "
+              "pruned (10).")
+@click.option("--max-retry", type=click.IntRange(min=0), default=3, show_default=True,
+              help="Retries of a trial whose worker died.")
+@click.option("--heartbeat", type=click.IntRange(min=1), default=60, show_default=True,
+              help="Seconds between a running trial's heartbeats; stale after 5 missed ones.")
+@click.option("--quiet", is_flag=True, help="No progress bars.")
+@click.option("--worker", is_flag=True, hidden=True)
+@click.option("--slot", type=click.IntRange(min=0), default=0, hidden=True)
+@SETS
+@ARCH
+@THREADS
+def study_run(config_path, space_path, trials, storage, workers, name, root, resume, objective, seed, startup_trials,
+              prune, prune_startup, prune_warmup, max_retry, heartbeat, quiet, worker, slot, sets, arch, threads):
+    """Tune any config keys with Optuna (TPE, median pruning); the study survives crashes and spreads over
+    machines through a shared --storage (README: Multi-machine Optuna study)."""
+    from roshan import study as st
+
+    try:
+        if worker:
+            sys.exit(st.run_worker(storage, name, root, slot, st.local_values(arch, threads), quiet, heartbeat,
+                                   max_retry))
+        st.start_study(config_path, space_path, sets, name=name, root=root, storage=storage, resume=resume,
+                       trials=trials, workers=workers, arch=arch, threads=threads, quiet=quiet, heartbeat=heartbeat,
+                       max_retry=max_retry, echo=click.echo, objective=objective, seed=seed,
+                       startup_trials=startup_trials, prune=prune, prune_startup=prune_startup,
+                       prune_warmup=prune_warmup)
+    except (ConfigError, MapError, ValueError, FileNotFoundError) as exc:
+        _fail(exc)
+
+
+@study.command("report")
+@click.argument("target")
+@click.option("--name", default=None, help="Which study of a storage URL that holds several.")
+@click.option("--root", default="runs", show_default=True, type=click.Path(file_okay=False))
+@click.option("--top-k", type=click.IntRange(min=1), default=10, show_default=True,
+              help="Trials averaged into top<k>_mean.yaml (the thesis used 10).")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="Report folder (default: ROOT/NAME/report).")
+@click.option("--no-plots", is_flag=True)
+def study_report(target, name, root, top_k, out_dir, no_plots):
+    """Best trials of a study (a name under --root, a study folder, or a storage URL), the mean of the top-k
+    trials' parameters as a ready config YAML, and Optuna's plots."""
+    from roshan import study as st
+
+    try:
+        stu, default_out = st.open_for_report(target, root, name)
+        rep = st.write_report(stu, Path(out_dir) if out_dir else default_out, top_k, plots=not no_plots)
+    except (ConfigError, ValueError, FileNotFoundError) as exc:
+        _fail(exc)
+    click.echo(f"study {stu.study_name}: {len(stu.trials)} trials; the best completed:")
+    click.echo(rep["table"])
+    for path in rep["files"]:
+        click.echo(f"wrote {path}")
+    for plot, where in rep["plots"].items():
+        click.echo(f"{plot}: {where}")
 
 
 # ------------------------------------------------------------------------------------------------ bench
@@ -298,8 +400,9 @@ def bench_fire(env_counts, steps, warmup, big, json_path, arch, threads):
 @click.option("--envs", "env_counts", default="1,64,256,1024,4096", show_default=True, help="Comma-separated E.")
 @click.option("--drones", type=click.IntRange(min=1), default=4, show_default=True)
 @click.option("--fire", "fire_percentages", default="0.015,0.35", show_default=True, help="Ignition fractions.")
-@click.option("--policies", default="random,simple,collision", show_default=True,
-              help="random (env only), simple / collision (+ FlyAgent network inference).")
+@click.option("--policies", default="random,simple,collision,collision+ppo", show_default=True,
+              help="random (env only), simple / collision (+ FlyAgent network inference), simple+ppo / "
+                   "collision+ppo (+ the PPO update of configs/fly_*.yaml).")
 @click.option("--min-env-steps", type=click.IntRange(min=1), default=100_000, show_default=True,
               help="Timed env-steps per run (the collision network runs a quarter).")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None)
@@ -317,9 +420,11 @@ def bench_env(env_counts, drones, fire_percentages, policies, min_env_steps, jso
     except ValueError as exc:
         _fail(ValueError(f"--envs / --fire: expected comma-separated numbers ({exc})"))
     pols = [None if p == "random" else p for p in policies.split(",") if p.strip()]
-    unknown = [p for p in pols if p not in (None, "simple", "collision")]
+    known = (None, "simple", "collision", "simple+ppo", "collision+ppo")
+    unknown = [p for p in pols if p not in known]
     if unknown:
-        _fail(ValueError(f"--policies: unknown {unknown}; expected random, simple, collision"))
+        _fail(ValueError(f"--policies: unknown {unknown}; expected random, simple, collision, simple+ppo, "
+                         "collision+ppo"))
     report = b.env_speed(counts, drones, pcts, pols, min_env_steps=min_env_steps)
     click.echo(b.format_env_speed(report))
     if json_path:

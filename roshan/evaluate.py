@@ -91,6 +91,22 @@ def _save_frame(env: FlyVectorEnv, frames_dir: Path, k: int) -> None:
     Image.fromarray(env.render()).save(frames_dir / f"frame_{k:05d}.png")
 
 
+BASELINES = ("random", "greedy")
+
+
+def baseline_fn(name: str, num_envs: int, num_drones: int, seed: int):
+    """Scripted actions on flattened drone observations: ``random`` (uniform, seeded) or ``greedy`` (straight to
+    the goal, roshan.env.heuristics)."""
+    from roshan.env.heuristics import straight_to_goal
+
+    if name == "greedy":
+        return lambda obs: straight_to_goal(obs["agent"].unsqueeze(1)).squeeze(1)
+    if name == "random":
+        g = torch.Generator().manual_seed(seed)
+        return lambda obs: torch.rand(obs["agent"].shape[0], 2, generator=g) * 2.0 - 1.0
+    raise ValueError(f"--baseline: expected one of {', '.join(BASELINES)}, got {name!r}")
+
+
 def write_outputs(episodes: dict, out_dir: Path, title: str) -> dict:
     """episodes.csv, summary.json and the plots in ``out_dir``; returns the summary."""
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -113,9 +129,11 @@ def flyagent_json(summary: dict) -> dict:
 def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_envs: int | None = None,
                  out_dir: Path | None = None, json_path: Path | None = None, frames_dir: Path | None = None,
                  gif_path: Path | None = None, which: str = "best_objective", progress_bar: bool = True,
-                 overrides: list[str] | tuple[str, ...] = ()) -> dict:
+                 overrides: list[str] | tuple[str, ...] = (), baseline: str | None = None) -> dict:
     """Evaluate a run folder or checkpoint with deterministic actions; files go to ``out_dir`` (default
     ``<run>/eval``). ``overrides`` (``section.key=value``) change the evaluation setting, not the network.
+    With ``baseline`` (random | greedy) the scripted policy runs on the same episodes (same seed: same fire
+    layouts and wind) and its summary is returned under ``"baseline"``.
     Returns the summary dict of :func:`roshan.report.summarize` plus ``checkpoint`` and ``out_dir``."""
     cfg, agent, path = load_agent(target, which)
     cfg = apply_overrides(cfg, overrides) if overrides else cfg
@@ -124,6 +142,10 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
     if gif_path is not None and frames_dir is None:
         frames_dir = Path(gif_path).with_suffix("") / "frames"
     eps = run_episodes(env, policy_fn(agent), episodes, seed, frames_dir, progress_bar)
+    base_eps = None
+    if baseline is not None:
+        base_eps = run_episodes(env, baseline_fn(baseline, E, env.num_drones, seed), episodes, seed,
+                                progress_bar=progress_bar)
     env.close()
     run_dir = path.parent.parent if path.parent.name == "checkpoints" else path.parent
     out = Path(out_dir) if out_dir else run_dir / "eval"
@@ -133,9 +155,16 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         scalars = report.read_tensorboard_scalars(tb)
         if scalars:
             report.plot_learning_curves(scalars, out / "learning_curves.png")
+    payload = flyagent_json(summary)
+    if base_eps is not None:
+        base = write_outputs(base_eps, out / baseline, f"{baseline} baseline ({len(base_eps['reward'])} episodes, "
+                                                         f"seed {seed})")
+        report.plot_comparison({"policy": eps, baseline: base_eps}, out)
+        payload = {"policy": payload, baseline: flyagent_json(base)}
+        summary["baseline"] = base
     if json_path is not None:
         Path(json_path).parent.mkdir(parents=True, exist_ok=True)
-        Path(json_path).write_text(json.dumps(flyagent_json(summary), indent=2) + "\n")
+        Path(json_path).write_text(json.dumps(payload, indent=2) + "\n")
     if gif_path is not None:
         from roshan.kernels.render import write_gif
 

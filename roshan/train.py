@@ -30,7 +30,7 @@ from roshan.run import (
     new_run_dir,
     save_checkpoint,
 )
-from roshan.runtime import ensure_taichi, init_taichi
+from roshan.runtime import ensure_taichi, init_taichi, torch_device
 
 FAILURES = ("collision", "boundary", "timeout")
 
@@ -140,10 +140,10 @@ class PPOCollector:
         self.cache.clear()  # the parameters changed in the last update
         for t in range(self.T):
             o = flatten_drones(self.obs)
-            a, logp, v = agent.act(o, cache=self.cache, restarted=self.restarted)
+            a, logp, v, raw = agent.act_raw(o, cache=self.cache, restarted=self.restarted)
             for k, x in o.items():
                 self.buf_obs[k][t].copy_(x)
-            self.actions[t], self.log_probs[t], self.values[t] = a, logp, v
+            self.actions[t], self.log_probs[t], self.values[t] = raw, logp, v
             self.obs, r, term, trunc, info = env.step(a.view(env.num_envs, N, 2))
             self.rewards[t] = r.flatten()
             self.term[t] = term.repeat_interleave(N)
@@ -172,6 +172,125 @@ def rollout_steps(cfg: RunConfig) -> int:
     return steps
 
 
+class PPOLearner:
+    """One iteration = a rollout of ``horizon`` transitions, then one PPO update."""
+
+    def __init__(self, cfg: RunConfig, env: FlyVectorEnv, agent: PPO):
+        self.steps = rollout_steps(cfg)
+        self.collector = PPOCollector(env, agent, self.steps)
+        self.agent, self.env = agent, env
+
+    def iterate(self, generator: torch.Generator) -> tuple[int, dict, np.ndarray]:
+        rollout = self.collector.collect()
+        metrics = self.agent.update(rollout, generator)
+        rows = ended_rows(self.collector.ended, self.collector.stats)
+        return self.steps * self.env.num_envs, metrics, rows
+
+
+def next_observation(obs: dict, info: dict, ended: torch.Tensor) -> dict[str, torch.Tensor]:
+    """Per-drone next observations (E*N, ...): the env's ``final_obs`` where the episode ended this step."""
+    out = {}
+    for (k, v), f in zip(flatten_drones(obs).items(), flatten_drones(info["final_obs"]).values(), strict=True):
+        out[k] = torch.where(ended.view(-1, *[1] * (v.dim() - 1)), f, v)
+    return out
+
+
+class OffPolicyCollector:
+    """Steps the env with an off-policy agent's (noisy) actions into a replay buffer, one transition per drone;
+    ``not_done`` is 0 only at a real terminal (a timeout bootstraps from ``final_obs``)."""
+
+    def __init__(self, env: FlyVectorEnv, agent, buffer, explore: bool):
+        self.env, self.agent, self.buffer, self.explore = env, agent, buffer, explore
+        self.obs, _ = env.reset()
+
+    def step(self, generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        env, N = self.env, self.env.num_drones
+        o = {k: v.clone() for k, v in flatten_drones(self.obs).items()}
+        actions = self.agent.act(o, explore=self.explore, generator=generator)
+        self.obs, rewards, terms, truncs, info = env.step(actions.view(env.num_envs, N, 2))
+        ended = info["_episode_stats"]
+        nxt = next_observation(self.obs, info, ended.repeat_interleave(N))
+        self.buffer.add(o, actions, rewards.flatten(), (~terms).repeat_interleave(N).float(), nxt)
+        stats = torch.stack([info["episode_stats"][k] for k in EPISODE_FIELDS], dim=-1)
+        return rewards, ended, stats
+
+
+class TD3Learner:
+    """One iteration = ``env_steps_per_iteration`` env steps, each followed by one TD3 update call (k_epochs
+    gradient iterations) once the buffer holds ``min_memory_size`` transitions (learning.md 7)."""
+
+    env_steps_per_iteration = 64
+
+    def __init__(self, cfg: RunConfig, env: FlyVectorEnv, agent):
+        from roshan.algos.buffers import ReplayBuffer
+
+        obs, _ = env.reset()
+        shapes = {k: tuple(v.shape[2:]) for k, v in obs.items()}
+        self.buffer = ReplayBuffer(cfg.td3.memory_size, shapes, device=env.device)
+        self.collector = OffPolicyCollector(env, agent, self.buffer, explore=True)
+        self.agent, self.env = agent, env
+
+    def iterate(self, generator: torch.Generator) -> tuple[int, dict, np.ndarray]:
+        metrics: dict[str, list[float]] = collections.defaultdict(list)
+        rows, rewards = [], []
+        for _ in range(self.env_steps_per_iteration):
+            r, ended, stats = self.collector.step(generator)
+            rewards.append(float(r.mean()))
+            if bool(ended.any()):
+                rows.append(stats[ended].cpu().numpy())
+            if self.agent.is_ready(self.buffer):
+                for k, v in self.agent.update(self.buffer, generator).items():
+                    metrics[k].append(v)
+        out = {k: float(np.mean(v)) for k, v in metrics.items()}
+        out["rewards_raw"] = float(np.mean(rewards))
+        out["buffer"] = float(len(self.buffer))
+        rows_arr = np.concatenate(rows) if rows else np.zeros((0, len(EPISODE_FIELDS)), np.float32)
+        return self.env_steps_per_iteration * self.env.num_envs, out, rows_arr
+
+
+class IQLLearner:
+    """Iterations 1..offline_updates: one pass each over the saved dataset (no env steps); then, if
+    ``online_updates`` > 0, one iteration = ``policy_freq`` env steps with the IQL actor appended to the
+    buffer, then one update of ``k_epochs`` minibatches (learning.md 8)."""
+
+    def __init__(self, cfg: RunConfig, env: FlyVectorEnv, agent):
+        from roshan.algos.buffers import ReplayBuffer
+
+        if not cfg.train.buffer_path:
+            raise ValueError("train.buffer_path: IQL learns from a saved replay buffer; record one with "
+                             "`roshan eval RUN --save-buffer N FILE`")
+        self.buffer = ReplayBuffer.load(cfg.train.buffer_path, device=env.device)
+        if cfg.iql.online_updates > 0:  # room for the online transitions after the dataset
+            extra = cfg.iql.online_updates * cfg.iql.policy_freq * env.num_envs * env.num_drones
+            self.buffer = ReplayBuffer.load(cfg.train.buffer_path, device=env.device,
+                                            capacity=len(self.buffer) + extra)
+        self.cfg, self.agent, self.env = cfg, agent, env
+        self.collector = None
+        self.offline_done = 0
+
+    def iterate(self, generator: torch.Generator) -> tuple[int, dict, np.ndarray]:
+        empty = np.zeros((0, len(EPISODE_FIELDS)), np.float32)
+        if self.offline_done < self.cfg.iql.offline_updates:
+            self.offline_done += 1
+            metrics = self.agent.offline_pass(self.buffer, generator)
+            metrics["rewards_raw"] = float(self.buffer.rewards[:len(self.buffer)].mean())
+            return 0, metrics, empty
+        if self.collector is None:
+            self.collector = OffPolicyCollector(self.env, self.agent, self.buffer, explore=False)
+        rows = []
+        for _ in range(self.cfg.iql.policy_freq):
+            _, ended, stats = self.collector.step(generator)
+            if bool(ended.any()):
+                rows.append(stats[ended].cpu().numpy())
+        metrics = self.agent.update(self.buffer, generator)
+        metrics["rewards_raw"] = float("nan")
+        return self.cfg.iql.policy_freq * self.env.num_envs, metrics, np.concatenate(rows) if rows else empty
+
+
+def make_learner(cfg: RunConfig, env: FlyVectorEnv, agent):
+    return {"ppo": PPOLearner, "td3": TD3Learner, "iql": IQLLearner}[cfg.train.algo](cfg, env, agent)
+
+
 # ------------------------------------------------------------------------------------------------ the loop
 
 
@@ -197,19 +316,18 @@ class Trainer:
         self.cfg, self.run_dir = cfg, Path(run_dir)
         self.progress_bar, self.on_update = progress_bar, on_update
         tc = cfg.train
-        if tc.algo != "ppo":
-            raise NotImplementedError(f"train.algo = {tc.algo!r}: use roshan.train.train(), which dispatches")
-        self.steps_per_rollout = rollout_steps(cfg)
+        if tc.algo == "ppo":
+            rollout_steps(cfg)  # check the horizon before building anything
         self.generator = torch.Generator().manual_seed(tc.seed)
         torch.manual_seed(tc.seed)
-        self.agent = make_agent(cfg)
+        self.agent = make_agent(cfg, torch_device())
         self.progress = Progress()
         self.episodes = EpisodeLog(window=tc.objective_window)
         if resume_state is not None:
             self._restore(resume_state)
         # A resumed run starts fresh episodes from a seed that depends on where it stopped.
         self.env = make_env(cfg, tc.num_envs, seed=tc.seed + 7919 * self.progress.updates)
-        self.collector = PPOCollector(self.env, self.agent, self.steps_per_rollout)
+        self.learner = make_learner(cfg, self.env, self.agent)
         from torch.utils.tensorboard import SummaryWriter
 
         self.writer = SummaryWriter(str(self.run_dir / "tb"), purge_step=self.progress.env_steps or None)
@@ -240,8 +358,10 @@ class Trainer:
     def _bar(self):
         from tqdm import tqdm
 
-        total = self.cfg.train.total_steps or None
-        return tqdm(total=total, initial=self.progress.env_steps, unit="step", dynamic_ncols=True,
+        tc = self.cfg.train
+        total = tc.total_steps if tc.total_steps and tc.algo != "iql" else None
+        return tqdm(total=total, initial=self.progress.env_steps if total else self.progress.updates,
+                    unit="step" if total else "update", dynamic_ncols=True,
                     disable=not self.progress_bar, desc=self.run_dir.name)
 
     # ------------------------------------------------------------------------------------------ run
@@ -251,17 +371,16 @@ class Trainer:
         try:
             while not self.done():
                 t0 = time.perf_counter()
-                rollout = self.collector.collect()
-                metrics = self.agent.update(rollout, self.generator)
-                self.episodes.add(ended_rows(self.collector.ended, self.collector.stats))
-                steps = self.steps_per_rollout * self.env.num_envs
+                steps, metrics, rows = self.learner.iterate(self.generator)
+                self.episodes.add(rows)
                 dt = time.perf_counter() - t0
                 p = self.progress
                 p.updates, p.env_steps, p.seconds = p.updates + 1, p.env_steps + steps, p.seconds + dt
                 metrics["steps_per_s"] = steps / dt
+                metrics["updates_per_s"] = 1.0 / dt
                 self._log(metrics)
                 self._checkpoint(metrics["rewards_raw"])
-                bar.update(steps)
+                bar.update(steps if bar.total else 1)
                 bar.set_postfix(sps=f"{steps / dt:,.0f}", success=f"{self.episodes.success_so_far:.2f}",
                                 R=f"{metrics['rewards_raw']:+.3f}", refresh=False)
                 if self.on_update is not None:
@@ -273,7 +392,7 @@ class Trainer:
         return self.progress
 
     def _log(self, m: dict) -> None:
-        w, step = self.writer, self.progress.env_steps
+        w, step = self.writer, self.progress.env_steps or self.progress.updates
         tags = {"Rewards/Rewards_Raw": "rewards_raw", "Rewards/Rewards_norm": "rewards_scaled",
                 "Rewards/Returns": "returns", "Rewards/Advantages": "advantages", "Rewards/Values": "values",
                 "Training/Approx_KL": "approx_kl", "Training/Clip_Fraction": "clip_fraction",
@@ -283,6 +402,9 @@ class Trainer:
         for tag, key in tags.items():
             if key in m and m[key] == m[key]:
                 w.add_scalar(tag, m[key], step)
+        for key, value in m.items():  # TD3 / IQL metrics are named "group/name" already
+            if "/" in key and value == value:
+                w.add_scalar(key, value, step)
         ep = self.episodes.drain()
         if ep:
             w.add_scalar("Episodes/success_rate", ep["success"], step)
@@ -297,7 +419,7 @@ class Trainer:
         """latest always; best_reward / best_objective when the metric ties or improves (learning.md 9)."""
         p, state = self.progress, self.state_dict()
         save_checkpoint(state, checkpoint_path(self.run_dir, "latest"))
-        if batch_reward >= p.best_reward:
+        if batch_reward == batch_reward and batch_reward >= p.best_reward:
             p.best_reward = batch_reward
             save_checkpoint(self.state_dict(), checkpoint_path(self.run_dir, "best_reward"))
         objective = self.episodes.objective
@@ -321,6 +443,8 @@ def start_run(cfg: RunConfig, root: str | Path = "runs", name: str | None = None
 def resume_state(run_dir: Path, cfg: RunConfig) -> dict | None:
     """The ``latest`` checkpoint of ``run_dir`` after checking it fits ``cfg`` (None if there is none yet)."""
     path = checkpoint_path(run_dir, "latest")
+    for stale in path.parent.glob(".*.tmp"):  # a write the killed run did not finish; the old file is whole
+        stale.unlink()
     if not path.is_file():
         return None
     state = load_checkpoint(path)

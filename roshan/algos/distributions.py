@@ -17,6 +17,17 @@ class ClippedGaussian:
     def sample(self) -> torch.Tensor:
         return self.base.sample().clamp(-1.0, 1.0)
 
+    # The "raw" interface: what a learner stores is the clamped action itself.
+    def sample_raw(self) -> torch.Tensor:
+        return self.sample()
+
+    def log_prob_raw(self, raw: torch.Tensor) -> torch.Tensor:
+        return self.log_prob(raw)
+
+    @staticmethod
+    def to_action(raw: torch.Tensor) -> torch.Tensor:
+        return raw
+
     def log_prob(self, actions: torch.Tensor) -> torch.Tensor:
         """Summed over the action dimensions: [B, A] -> [B]."""
         return self.base.log_prob(actions.clamp(-1.0, 1.0)).sum(-1)
@@ -41,6 +52,22 @@ class TanhNormal:
 
     def sample(self) -> torch.Tensor:
         return torch.tanh(self.base.sample())
+
+    # The "raw" interface: a learner stores the pre-tanh sample u and computes log p exactly from it. Inverting
+    # a stored tanh(u) breaks once |u| > ~7.3, where tanh(u) rounds to 1 in float32 and the clamp to 1 - 1e-6
+    # maps every such u to 7.25: old and new log-probs then disagree wildly (our first collision run collapsed
+    # with approx KL ~1e5 after 1.5M steps; the reference inverts the clamped action, learning.md 4).
+    def sample_raw(self) -> torch.Tensor:
+        return self.base.sample()
+
+    def log_prob_raw(self, u: torch.Tensor) -> torch.Tensor:
+        """log p(tanh(u)) from u itself: [B, A] -> [B]."""
+        log_det = 2.0 * (math.log(2.0) - u - F.softplus(-2.0 * u))
+        return (self.base.log_prob(u) - log_det).sum(-1)
+
+    @staticmethod
+    def to_action(u: torch.Tensor) -> torch.Tensor:
+        return torch.tanh(u)
 
     def log_prob(self, actions: torch.Tensor) -> torch.Tensor:
         """log p(a) = log N(u) - log(1 - tanh(u)^2), u = atanh(a), summed over dimensions: [B, A] -> [B].

@@ -59,7 +59,7 @@ class Rollout(NamedTuple):
     """
 
     obs: dict[str, torch.Tensor]
-    actions: torch.Tensor  # [T, B, 2]
+    actions: torch.Tensor  # [T, B, 2] as the distribution stores them (TanhNormal: the pre-tanh sample)
     log_probs: torch.Tensor  # [T, B]
     values: torch.Tensor  # [T, B]
     next_values: torch.Tensor  # [T, B]
@@ -187,13 +187,22 @@ class PPO:
 
         With a :class:`FrameCache` only the newest frame is encoded (``restarted`` (B,) bool marks rows whose
         episode restarted since the previous call: their stack holds copies of one frame)."""
+        actions, logp, value, _ = self.act_raw(obs, deterministic, cache, restarted)
+        return actions, logp, value
+
+    @torch.no_grad()
+    def act_raw(self, obs: dict[str, torch.Tensor], deterministic: bool = False, cache: "FrameCache | None" = None,
+                restarted: torch.Tensor | None = None):
+        """:meth:`act` plus what a rollout stores for the update (the distribution's raw sample)."""
         if cache is None:
             mean, std, value = self.net(obs)
         else:
             mean, std, value = self.net.from_frames(*cache.encode(self.net, obs, restarted))
         dist = self.distribution(mean, std)
-        actions = dist.mode if deterministic else dist.sample()
-        return actions, dist.log_prob(actions), value
+        if deterministic:
+            return dist.mode, dist.log_prob(dist.mode), value, dist.mode
+        raw = dist.sample_raw()
+        return dist.to_action(raw), dist.log_prob_raw(raw), value, raw
 
     @torch.no_grad()
     def value(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
@@ -307,7 +316,7 @@ class PPO:
         adv = (adv - adv.mean()) / (adv.std(unbiased=False) + 1e-8) if adv.numel() > 1 else adv * 0.0
         mean, std, value = forward()
         dist = self.distribution(mean, std)
-        new_logp = dist.log_prob(actions)
+        new_logp = dist.log_prob_raw(actions)
         log_ratio = (new_logp - old_logp).clamp(-10.0, 10.0)
         ratio = log_ratio.exp()
         with torch.no_grad():

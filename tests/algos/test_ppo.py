@@ -104,7 +104,8 @@ def test_ppo_learns_a_contextual_bandit(minibatch):
 
 def test_kl_early_stop_skips_the_rest_of_each_epoch():
     g = torch.Generator().manual_seed(0)
-    cfg = PPOConfig(horizon=4 * 64, batch_size=64, k_epochs=3, kl_early_stop=True, kl_target=1e-5, lr=1e-2)
+    cfg = PPOConfig(horizon=4 * 64, batch_size=64, k_epochs=3, kl_early_stop=True, kl_target=1e-5, lr=1e-2,
+                    kl_estimator="k2")  # k2 >= 0: any real change of the policy exceeds the target
     agent = PPO(cfg, collision=False)
     metrics = agent.update(bandit_rollout(agent, 4, 64, g), g)
     # epoch 1: minibatch 1 sees KL ~ 0 (float noise only) and steps, minibatch 2 sees KL > 0 and stops the epoch;
@@ -153,3 +154,16 @@ def test_state_dict_round_trip_reproduces_actions():
     obs = bandit_obs(16, torch.rand(16, 2, generator=g))
     torch.testing.assert_close(a.act(obs, deterministic=True)[0], b.act(obs, deterministic=True)[0])
     assert b.updates == 1 and b.scaler.count == a.scaler.count
+
+
+def test_tanh_normal_raw_log_prob_matches_and_survives_saturation():
+    from roshan.algos.distributions import TanhNormal
+
+    dist = TanhNormal(torch.tensor([[0.3, -0.2]]), torch.tensor([0.5, 0.5]))
+    u = torch.tensor([[0.4, -1.0]])
+    torch.testing.assert_close(dist.log_prob_raw(u), dist.log_prob(torch.tanh(u)))
+    # tanh(10) and tanh(13) are both 1.0 in float32: only the raw sample tells them apart
+    far = TanhNormal(torch.tensor([[10.0, 0.0]]), torch.tensor([1.0, 1.0]))
+    a, b = far.log_prob_raw(torch.tensor([[10.0, 0.0]])), far.log_prob_raw(torch.tensor([[13.0, 0.0]]))
+    assert torch.isfinite(a).all() and torch.isfinite(b).all() and float(a) != float(b)
+    assert torch.tanh(torch.tensor(10.0)) == torch.tanh(torch.tensor(13.0))
