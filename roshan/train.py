@@ -328,6 +328,7 @@ class Trainer:
         # A resumed run starts fresh episodes from a seed that depends on where it stopped.
         self.env = make_env(cfg, tc.num_envs, seed=tc.seed + 7919 * self.progress.updates)
         self.learner = make_learner(cfg, self.env, self.agent)
+        self.eval_env = None
         from torch.utils.tensorboard import SummaryWriter
 
         self.writer = SummaryWriter(str(self.run_dir / "tb"), purge_step=self.progress.env_steps or None)
@@ -380,6 +381,8 @@ class Trainer:
                 metrics["updates_per_s"] = 1.0 / dt
                 self._log(metrics)
                 self._checkpoint(metrics["rewards_raw"])
+                if self.cfg.train.eval_every and p.updates % self.cfg.train.eval_every == 0:
+                    self._periodic_eval()
                 bar.update(steps if bar.total else 1)
                 bar.set_postfix(sps=f"{steps / dt:,.0f}", success=f"{self.episodes.success_so_far:.2f}",
                                 R=f"{metrics['rewards_raw']:+.3f}", refresh=False)
@@ -388,7 +391,7 @@ class Trainer:
                                     "objective": self.episodes.objective, "reward": metrics["rewards_raw"]})
         finally:
             bar.close()
-            self.writer.flush()
+            self.writer.close()
         return self.progress
 
     def _log(self, m: dict) -> None:
@@ -414,6 +417,19 @@ class Trainer:
                 w.add_scalar(f"Episodes/{name}_rate", ep[f"{name}_rate"], step)
         if len(self.episodes.recent) >= self.episodes.window:
             w.add_scalar("Training/Objective", self.episodes.objective, step)
+
+    def _periodic_eval(self) -> None:
+        """Deterministic episodes with the current weights on a separate batch of envs (fixed seed, so the
+        same fire layouts every time), logged as Evaluation/* scalars."""
+        from roshan import report
+        from roshan.evaluate import policy_fn, run_episodes
+
+        tc = self.cfg.train
+        if self.eval_env is None:
+            self.eval_env = make_env(self.cfg, min(tc.eval_envs, tc.eval_episodes), seed=tc.seed + 10_000)
+        episodes = run_episodes(self.eval_env, policy_fn(self.agent), tc.eval_episodes, seed=tc.seed + 10_000)
+        for tag, value in report.evaluation_scalars(report.summarize(episodes)).items():
+            self.writer.add_scalar(tag, value, self.progress.env_steps or self.progress.updates)
 
     def _checkpoint(self, batch_reward: float) -> None:
         """latest always; best_reward / best_objective when the metric ties or improves (learning.md 9)."""
@@ -485,7 +501,7 @@ def train_auto(cfg: RunConfig, root: str | Path = "runs", name: str | None = Non
                evaluate_at_end: bool = True) -> list[dict]:
     """``train.auto_train`` = k independent runs (seeds seed .. seed+k-1) in sequence, each evaluated; one
     run goes straight to ``root/name``, several to ``root/name/seed_<s>``."""
-    from roshan.config import replace
+    from roshan.config import apply_overrides
 
     k = cfg.train.auto_train
     if k == 1:
@@ -493,7 +509,7 @@ def train_auto(cfg: RunConfig, root: str | Path = "runs", name: str | None = Non
     parent = start_run(cfg, root, name)
     results = []
     for i in range(k):
-        seed_cfg = replace(cfg, train=replace(cfg.train, seed=cfg.train.seed + i, auto_train=1))
+        seed_cfg = apply_overrides(cfg, [f"train.seed={cfg.train.seed + i}", "train.auto_train=1"])
         run_dir = start_run(seed_cfg, parent, f"seed_{seed_cfg.train.seed}")
         results.append(train(seed_cfg, run_dir, progress_bar=progress_bar, evaluate_at_end=evaluate_at_end))
     if evaluate_at_end:

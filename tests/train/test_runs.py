@@ -154,3 +154,21 @@ def test_td3_and_iql_run_end_to_end(tmp_path):
     state = load_checkpoint(checkpoint_path(tmp_path / "iql"))
     assert state["progress"]["updates"] == 2 and state["progress"]["env_steps"] == 0
     assert torch.is_tensor(next(iter(state["agent"]["actor"].values())))
+
+
+def test_auto_train_seeds_and_periodic_evaluation(tmp_path):
+    from roshan.report import read_tensorboard_scalars
+
+    res = cli("train", ROOT / "configs/fly_simple.yaml", "--root", tmp_path, "--name", "auto", "--quiet", *TINY,
+              "--set", "train.max_updates=2", "--set", "train.auto_train=2", "--set", "train.seed=7",
+              "--set", "train.eval_every=1", "--set", "train.eval_episodes=2", "--set", "train.eval_envs=2")
+    assert res.exit_code == 0, res.output
+    parent = tmp_path / "auto"
+    summary = json.loads((parent / "auto_train.json").read_text())
+    assert len(summary["success_rates"]) == 2
+    for seed in (7, 8):
+        run = parent / f"seed_{seed}"
+        assert (run / "eval" / "summary.json").is_file()
+        assert load_checkpoint(checkpoint_path(run))["config"]["train"]["seed"] == seed
+        scalars = read_tensorboard_scalars(run / "tb")
+        assert len(scalars["Evaluation/Success_rate"]) == 2  # after each of the 2 updates
