@@ -98,7 +98,7 @@ class IgnitionConfig:
 
 @dataclass(frozen=True)
 class DroneConfig:
-    """FlyAgent drones (agents.md 1, 3, 4): physics, sensing and start layout."""
+    """FlyAgent drones (agents.md 1, 3, 4, 14): physics, sensing, start layout and water."""
 
     num_drones: int = num(4, 1, 64, doc="drones per env")
     max_speed: float = num(10.0, 0.0, lo_open=True, doc="v_max per axis (m/s)")
@@ -107,6 +107,9 @@ class DroneConfig:
     use_vel_bins: bool = True  # actions rounded to 41 levels (steps of 0.05)
     use_velocity_change: bool = False  # acceleration mode: v += a * (v_max / 2) * dt
     groundstation_start_percentage: float = num(1.0, 0.0, 1.0, doc="chance a drone starts at the groundstation")
+    use_water_limit: bool = False  # finite tank, newest code (agents.md 14); off in the thesis experiments
+    water_capacity: float = num(4.0, 0.0, lo_open=True, doc="tank size in drops (one drop puts out one cell)")
+    recharge_time: float = num(2.0, 0.0, doc="seconds an empty tank takes to refill at the groundstation")
 
 
 @dataclass(frozen=True)

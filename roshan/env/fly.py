@@ -1,12 +1,13 @@
 """FlyAgent vector environment: E fire maps with N drones each, stepped by one kernel launch.
 
-One step of env e (agents.md 2), serially inside the launch: the fire update; then every drone moves, handles
-its goal (complex policy: extinguish and take the nearest unreserved fire; simple: reaching the goal is the
-objective), is checked for termination and rewarded; then neighbours and collisions are recomputed and a
-frame is pushed. A second launch copies the observation of every env whose episode ended to ``final_obs``
-and resets it (Gymnasium's same-step autoreset). Resetting in its own kernel, shared with ``reset()``,
-compiles the reset code once instead of inlining it into the step kernel too (a fresh machine compiled the
-fused version for ~25 s).
+One physics step of env e (agents.md 2), serially inside the launch: the fire update; then every drone moves,
+handles its goal (complex policy: extinguish and take the nearest unreserved fire; simple: reaching the goal is
+the objective), is checked for termination and rewarded; then neighbours and collisions are recomputed. One
+env step (a control period, agents.md 12) runs ``frame_skips`` physics steps with the same actions, fewer if
+the episode ends, and then pushes one observation frame. A second launch copies the observation of every env
+whose episode ended to ``final_obs`` and resets it (Gymnasium's same-step autoreset). Resetting in its own
+kernel, shared with ``reset()``, compiles the reset code once instead of inlining it into the step kernel too
+(a fresh machine compiled the fused version for ~25 s).
 """
 
 import math
@@ -44,6 +45,7 @@ class FlyConfig:
     fire_goal_percentage: float = num(1.0, 0.0, 1.0, doc="chance an initial goal is a fire (else a corner)")
     frames: int = num(3, 1, 8, doc="stacked observation frames (index 0 = newest)")
     sticky_extinguish: bool = False  # True reproduces the original's sticky Extinguish reward flag (agents.md 7.1)
+    frame_skips: int = num(1, 1, 16, doc="physics steps per action; only the last one's reward is returned")
     rewards: RewardConfig = field(default_factory=RewardConfig)
 
 
@@ -73,12 +75,17 @@ class FlyKernels:
         self.collision_on = cfg.collision
         self.sticky = cfg.sticky_extinguish
         self.frames = cfg.frames
+        self.frame_skips = cfg.frame_skips
+        if not 1 <= cfg.frame_skips <= 16:
+            raise ValueError(f"fly.frame_skips = {cfg.frame_skips!r}; expected an integer in [1, 16]")
+        # Complex policy with a finite tank: an empty drone flies home and waits there until full.
+        self.water_policy = self.is_complex and drones.use_water
         self.t_max = t_max
         self.goal_fire_p = cfg.fire_goal_percentage
         E = fire.num_envs
         self.ended = ti.field(ti.i32, E)  # the episode ended in this step: restart() resets the env
-        self.remaining = ti.field(ti.i32, E)
-        self.steps = ti.field(ti.i32, E)
+        self.remaining = ti.field(ti.i32, E)  # physics steps left
+        self.steps = ti.field(ti.i32, E)  # physics steps so far
         self.ret = ti.field(ti.f32, E)
 
     def reset_all(self, obs, final_obs, seed_key: int) -> None:
@@ -129,6 +136,24 @@ class FlyKernels:
     @ti.func
     def step_env(self, actions: ti.template(), obs: ti.template(), rewards: ti.template(), dones: ti.template(),
                  episode: ti.template(), e):
+        """One control period of env e (agents.md 12): ``frame_skips`` physics steps with the same actions,
+        stopping at the step that ends the episode, then one new observation frame. ``rewards`` and ``dones``
+        are the last executed step's: like the reference, the rewards of the steps before it are dropped."""
+        if ti.static(self.frame_skips == 1):
+            self.physics_step(actions, rewards, dones, episode, e, 1)
+        else:
+            for s in range(self.frame_skips):
+                if self.ended[e] == 0:  # 0 on entry: restart() clears it for every env that ended
+                    self.physics_step(actions, rewards, dones, episode, e,
+                                      ti.cast(s == self.frame_skips - 1, ti.i32))
+        for d in range(self.drones.num_drones):
+            observe.push_frame(obs, self.drones, e, d, self.frames)
+
+    @ti.func
+    def physics_step(self, actions: ti.template(), rewards: ti.template(), dones: ti.template(),
+                     episode: ti.template(), e, is_last):
+        """One fire update and drone step of env e; the episode return counts the step if ``is_last`` of its
+        control period or if the episode ends here (the reward the learner sees)."""
         dr = self.drones
         self.fire.step_env(e)
         self.remaining[e] -= 1
@@ -158,9 +183,8 @@ class FlyKernels:
             rewards[e, d] = r
             reward_sum += r
         dr.update_neighbours(e)
-        for d in range(dr.num_drones):
-            observe.push_frame(obs, dr, e, d, self.frames)
-        self.ret[e] += reward_sum / dr.num_drones
+        if is_last != 0 or any_terminal != 0:
+            self.ret[e] += reward_sum / dr.num_drones
         dones[e, 0] = ti.u8(0)
         dones[e, 1] = ti.u8(0)
         if any_terminal != 0:
@@ -174,18 +198,35 @@ class FlyKernels:
     @ti.func
     def handle_goal(self, e, d) -> ti.i32:
         """agents.md 7: at its goal a complex-policy drone extinguishes and takes the next fire; a simple-policy
-        drone has reached its objective. Returns 1 if this drone put out the map's last fire."""
+        drone has reached its objective. Returns 1 if this drone put out the map's last fire.
+
+        With the water limit (complex policy) a drop that empties the tank sends the drone to the groundstation
+        centre (no reservation); it takes the next fire once its tank is full again (agents.md 10.2, 14).
+        """
         dr = self.drones
         if ti.static(not self.sticky):
             dr.extinguished[e, d] = 0  # the fix: Extinguish pays on the step water hits a fire only
         last = 0
-        if dr.at_goal(e, d) != 0:
+        going_home = 0
+        if ti.static(self.water_policy):
+            going_home = dr.refilling[e, d]
+            if going_home != 0 and dr.water[e, d] >= dr.capacity:  # refilled in move_drone this step
+                dr.refilling[e, d] = 0
+                dr.next_fire(e, d)
+        if going_home == 0 and dr.at_goal(e, d) != 0:
             if ti.static(self.is_complex):
                 if dr.extinguish_here(e, d) != 0:
                     dr.objective[e, d] = 1
                     last = 1
                 dr.goal_cell[e, d] = -1
-                dr.next_fire(e, d)
+                empty = 0
+                if ti.static(self.water_policy):
+                    empty = 1 - dr.has_water(e, d)
+                if empty != 0:
+                    dr.refilling[e, d] = 1
+                    dr.goal[e, d] = dr.groundstation_centre(e)
+                else:
+                    dr.next_fire(e, d)
             else:
                 dr.objective[e, d] = 1
         return last
@@ -250,6 +291,11 @@ class FlyVectorEnv(gym.vector.VectorEnv):
     ``info`` holds ``final_obs`` (the observation of envs that ended this step, same layout), ``episode_stats``
     (a dict of (E,) tensors: success, reason index into :data:`REASONS`, steps, burned_fraction, extinguished,
     return) and ``_episode_stats`` (the (E,) bool mask of envs whose episode ended).
+
+    With ``FlyConfig.frame_skips = k`` one ``step`` applies the actions for k physics steps (fewer when the
+    episode ends inside them) and returns the last step's rewards (the episode ``return`` sums those); step
+    limits and the episode's ``steps`` count physics steps. With ``DroneConfig.use_water_limit`` the tanks are
+    readable as :attr:`water`.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": ["rgb_array"]}
@@ -372,3 +418,9 @@ class FlyVectorEnv(gym.vector.VectorEnv):
     @property
     def drone_config(self) -> DroneConfig:
         return self.config.drones
+
+    @property
+    def water(self) -> torch.Tensor:
+        """(E, N) float32 drops left in each drone's tank: a copy on the sim device, not updated by later steps
+        (always ``water_capacity`` without ``use_water_limit``)."""
+        return self.drones.water.to_torch(device=self.device)

@@ -1,4 +1,5 @@
-"""Drone physics on the fire simulator's envs (agents.md 3-4): motion, boundary, neighbours and collisions.
+"""Drone physics on the fire simulator's envs (agents.md 3-4, 14): motion, boundary, neighbours, collisions
+and the water tank.
 
 Drones live on the second axis of every field, ``(E, N)``. Positions and velocities are in metres and m/s
 along (rows, cols); goals and neighbour offsets are in grid units (metres / cell size), as in the reference.
@@ -52,6 +53,11 @@ class DroneSim:
         margin = max(0.05 * self.cell, 0.1)
         self.ring = min(self.cell / 2.0 - margin, max(2.0 * cfg.drone_size, 0.35 * self.cell))
         self.start_gs = cfg.groundstation_start_percentage
+        # Water (agents.md 14, newest code). Every use sits behind ti.static(self.use_water), so without the
+        # limit the kernels are the ones of an infinite tank.
+        self.use_water = cfg.use_water_limit
+        self.capacity = cfg.water_capacity
+        self.refill_rate = cfg.water_capacity * self.dt / (cfg.recharge_time + 1e-4)  # per step at the station
 
         self.pos = ti.Vector.field(2, ti.f32, (E, N))
         self.vel = ti.Vector.field(2, ti.f32, (E, N))
@@ -66,6 +72,9 @@ class DroneSim:
         self.n_extinguished = ti.field(ti.i32, (E, N))
         self.objective = ti.field(ti.i32, (E, N))  # objective_reached
         self.prev_dist = ti.field(ti.f32, (E, N))  # distance to the goal at the previous reward (grid units)
+        self.water = ti.field(ti.f32, (E, N))  # drops left in the tank; always full without use_water_limit
+        self.refilling = ti.field(ti.i32, (E, N))  # complex policy: flying home because the tank ran empty
+        self.water.fill(cfg.water_capacity)
         self._all = np.ones(E, dtype=np.int32)
 
     # ------------------------------------------------------------------------------------------ public API
@@ -93,6 +102,10 @@ class DroneSim:
         self.pos.from_numpy(np.ascontiguousarray(pos, dtype=np.float32))
         self.vel.from_numpy(np.ascontiguousarray(vel, dtype=np.float32))
         self._refresh_neighbours()
+
+    def set_water(self, water) -> None:
+        """Set every tank ((E, N) drops; tests, scripted scenes). Without ``use_water_limit`` nothing reads it."""
+        self.water.from_numpy(np.ascontiguousarray(water, dtype=np.float32))
 
     # ------------------------------------------------------------------------------------------ kernels
 
@@ -155,10 +168,14 @@ class DroneSim:
             self.extinguished[e, d] = 0
             self.n_extinguished[e, d] = 0
             self.objective[e, d] = 0
+            if ti.static(self.use_water):
+                self.water[e, d] = self.capacity
+                self.refilling[e, d] = 0
 
     @ti.func
     def move_drone(self, e, d, a):
-        """agents.md 3.1: bins, velocity or acceleration mode, per-axis clamp, integrate, out-of-area count."""
+        """agents.md 3.1: bins, velocity or acceleration mode, per-axis clamp, integrate, out-of-area count;
+        with the water limit, refill at the groundstation (agents.md 14)."""
         a = ti.math.clamp(a, -1.0, 1.0)
         if ti.static(self.use_bins):
             a = ti.Vector([bin_action(a[0]), bin_action(a[1])])
@@ -173,6 +190,16 @@ class DroneSim:
             self.out_count[e, d] += 1
         else:
             self.out_count[e, d] = 0
+        if ti.static(self.use_water):
+            self.refill(e, d)
+
+    @ti.func
+    def refill(self, e, d):
+        """Newest code: min(capacity, w + capacity * dt / (recharge_time + 1e-4)) while the drone's cell is the
+        groundstation's (full after ceil((recharge_time + 1e-4) / dt) steps from empty: 21 with the defaults)."""
+        gs = self.groundstation[e]
+        if self.cell_of(e, d) == gs[0] * self.cols + gs[1]:
+            self.water[e, d] = ti.min(self.capacity, self.water[e, d] + self.refill_rate)
 
     @ti.func
     def is_outside(self, p) -> ti.i32:
@@ -300,14 +327,25 @@ class DroneSim:
         return ti.cast(ti.abs(g[0]) < 0.25 and ti.abs(g[1]) < 0.25, ti.i32)
 
     @ti.func
+    def has_water(self, e, d) -> ti.i32:
+        """1 unless the water limit is on and the tank is empty."""
+        has = 1
+        if ti.static(self.use_water):
+            has = ti.cast(self.water[e, d] > 0.0, ti.i32)
+        return has
+
+    @ti.func
     def extinguish_here(self, e, d) -> ti.i32:
-        """agents.md 7.1: drop water on the cell under the drone if it burns. Returns 1 if that was the last
-        burning cell of the map (the drone reached the complex policy's objective)."""
+        """agents.md 7.1: drop water on the cell under the drone if it burns (with the water limit: only from a
+        non-empty tank, which loses one unit, clamped at 0). Returns 1 if that was the last burning cell of the
+        map (the drone reached the complex policy's objective)."""
         c = self.cell_of(e, d)
         last = 0
         self.extinguished[e, d] = 0
         if c >= 0:
-            if self.fire.is_burning(e, c) != 0:
+            if self.fire.is_burning(e, c) != 0 and self.has_water(e, d) != 0:
+                if ti.static(self.use_water):
+                    self.water[e, d] = ti.max(self.water[e, d] - 1.0, 0.0)
                 self.fire.drop_water(e, c)
                 self.extinguished[e, d] = 1
                 self.n_extinguished[e, d] += 1
