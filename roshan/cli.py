@@ -185,8 +185,10 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
 @click.option("--episodes", type=click.IntRange(min=1), default=200, show_default=True)
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Env seed (fire layouts).")
 @click.option("--envs", type=click.IntRange(min=1), default=None, help="Envs run together (default: train.eval_envs).")
-@click.option("--checkpoint", "which", type=click.Choice(["best_objective", "best_reward", "latest"]),
-              default="best_objective", show_default=True, help="Which checkpoint of a run folder.")
+@click.option("--checkpoint", "which", default="best",
+              type=click.Choice(["best", "best_eval", "best_objective", "best_reward", "latest"]), show_default=True,
+              help="Which checkpoint of a run folder; best = best_eval (periodic evaluation) if the run has one, "
+                   "else best_objective.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Folder for episodes.csv, summary.json, plots (default: RUN/eval).")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,

@@ -20,7 +20,7 @@ from roshan.run import config_of_checkpoint, load_checkpoint, resolve_checkpoint
 from roshan.runtime import ensure_taichi, torch_device
 
 
-def load_agent(target: str | Path, which: str = "best_objective"):
+def load_agent(target: str | Path, which: str = "best"):
     """(config, agent, checkpoint path) of a run folder or a checkpoint file."""
     from roshan.train import make_agent
 
@@ -128,7 +128,7 @@ def flyagent_json(summary: dict) -> dict:
 
 def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_envs: int | None = None,
                  out_dir: Path | None = None, json_path: Path | None = None, frames_dir: Path | None = None,
-                 gif_path: Path | None = None, which: str = "best_objective", progress_bar: bool = True,
+                 gif_path: Path | None = None, which: str = "best", progress_bar: bool = True,
                  overrides: list[str] | tuple[str, ...] = (), baseline: str | None = None) -> dict:
     """Evaluate a run folder or checkpoint with deterministic actions; files go to ``out_dir`` (default
     ``<run>/eval``). ``overrides`` (``section.key=value``) change the evaluation setting, not the network.
@@ -175,7 +175,7 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
 
 @torch.no_grad()
 def save_buffer(target: str | Path, transitions: int, path: Path, seed: int = 0, num_envs: int | None = None,
-                which: str = "best_objective", overrides: list[str] | tuple[str, ...] = (),
+                which: str = "best", overrides: list[str] | tuple[str, ...] = (),
                 progress_bar: bool = True) -> str:
     """Record ``transitions`` (drone transitions) of the deterministic policy into a replay buffer file (the IQL
     dataset of learning.md 8: raw rewards, per-drone not_done, next observations; the env's ``final_obs`` is

@@ -41,7 +41,10 @@ from roshan.config import (
 )
 from roshan.env.fly import FlyConfig
 
-CHECKPOINTS = ("latest", "best_reward", "best_objective")
+CHECKPOINTS = ("latest", "best_reward", "best_objective", "best_eval")
+# What "best" means for evaluation: the periodic deterministic evaluation when the run had one (it measures the
+# policy that is shipped), else the training objective.
+BEST_ORDER = ("best_eval", "best_objective")
 
 
 @dataclass(frozen=True)
@@ -113,14 +116,15 @@ def checkpoint_path(run_dir: Path, which: str = "latest") -> Path:
     return Path(run_dir) / "checkpoints" / f"{which}.pt"
 
 
-def resolve_checkpoint(target: str | Path, which: str = "best_objective") -> Path:
-    """A checkpoint file, or a run folder's ``which`` checkpoint (falling back to ``latest``)."""
+def resolve_checkpoint(target: str | Path, which: str = "best") -> Path:
+    """A checkpoint file, or a run folder's ``which`` checkpoint (falling back to ``latest``); ``best`` is the
+    first of ``BEST_ORDER`` the run has."""
     target = Path(target)
     if target.is_file():
         return target
     if not target.is_dir():
         raise FileNotFoundError(f"{target}: no such run folder or checkpoint file")
-    for name in (which, "latest"):
+    for name in (*(BEST_ORDER if which == "best" else (which,)), "latest"):
         p = checkpoint_path(target, name)
         if p.is_file():
             return p

@@ -303,6 +303,7 @@ class Progress:
     seconds: float = 0.0
     best_reward: float = -math.inf
     best_objective: float = -math.inf
+    best_eval: float = -math.inf
 
     def state_dict(self) -> dict:
         return dict(self.__dict__)
@@ -380,9 +381,9 @@ class Trainer:
                 metrics["steps_per_s"] = steps / dt
                 metrics["updates_per_s"] = 1.0 / dt
                 self._log(metrics)
-                self._checkpoint(metrics["rewards_raw"])
                 if self.cfg.train.eval_every and p.updates % self.cfg.train.eval_every == 0:
-                    self._periodic_eval()
+                    self._periodic_eval()  # before _checkpoint, so that latest carries the new best_eval
+                self._checkpoint(metrics["rewards_raw"])
                 bar.update(steps if bar.total else 1)
                 bar.set_postfix(sps=f"{steps / dt:,.0f}", success=f"{self.episodes.success_so_far:.2f}",
                                 R=f"{metrics['rewards_raw']:+.3f}", refresh=False)
@@ -427,9 +428,16 @@ class Trainer:
         tc = self.cfg.train
         if self.eval_env is None:
             self.eval_env = make_env(self.cfg, min(tc.eval_envs, tc.eval_episodes), seed=tc.seed + 10_000)
-        episodes = run_episodes(self.eval_env, policy_fn(self.agent), tc.eval_episodes, seed=tc.seed + 10_000)
-        for tag, value in report.evaluation_scalars(report.summarize(episodes)).items():
+        episodes = run_episodes(self.eval_env, policy_fn(self.agent), tc.eval_episodes, seed=tc.seed + 10_000,
+                                progress_bar=False)
+        summary = report.summarize(episodes)
+        for tag, value in report.evaluation_scalars(summary).items():
             self.writer.add_scalar(tag, value, self.progress.env_steps or self.progress.updates)
+        # The deterministic policy is what gets shipped, and in the collision setting it can be much better or worse
+        # than the stochastic training objective says: keep the weights that evaluated best.
+        if summary["success_rate"] >= self.progress.best_eval:
+            self.progress.best_eval = summary["success_rate"]
+            save_checkpoint(self.state_dict(), checkpoint_path(self.run_dir, "best_eval"))
 
     def _checkpoint(self, batch_reward: float) -> None:
         """latest always; best_reward / best_objective when the metric ties or improves (learning.md 9)."""
@@ -471,7 +479,8 @@ def resume_state(run_dir: Path, cfg: RunConfig) -> dict | None:
 def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress_bar: bool = True,
           on_update: Callable[[dict], None] | None = None, evaluate_at_end: bool = True) -> dict:
     """Train one run in ``run_dir`` (continuing from its ``latest`` checkpoint if ``resume``), then evaluate
-    its ``best_objective`` checkpoint. Returns the evaluation summary plus the run's counters."""
+    its best checkpoint (``best_eval`` if periodic evaluation ran, else ``best_objective``) on episodes other than
+    the periodic evaluation's, which chose it. Returns the evaluation summary plus the run's counters."""
     ensure_taichi_for(cfg)
     if cfg.train.torch_threads:
         torch.set_num_threads(cfg.train.torch_threads)
@@ -482,7 +491,7 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress_bar: boo
     if evaluate_at_end:
         from roshan.evaluate import evaluate_run
 
-        summary = evaluate_run(run_dir, episodes=cfg.train.eval_episodes, seed=cfg.train.seed + 10_000,
+        summary = evaluate_run(run_dir, episodes=cfg.train.eval_episodes, seed=cfg.train.seed + 20_000,
                                num_envs=cfg.train.eval_envs, progress_bar=progress_bar)
         result["eval"] = summary
     return result
