@@ -253,6 +253,18 @@ def _suggest(key: str, valid) -> str:
     return f"; did you mean {close[0]!r}?" if close else f"; valid keys: {', '.join(sorted(valid))}"
 
 
+def _as_float(value: Any) -> float | None:
+    """A number, or a string like "3e-5" (YAML 1.1 reads an exponent without a dot as a string); else None."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return float(value)
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            return None
+    return None
+
+
 def _coerce(value: Any, hint, where: str, key: str):
     origin = typing.get_origin(hint)
     if origin in (typing.Union, types.UnionType):
@@ -269,8 +281,9 @@ def _coerce(value: Any, hint, where: str, key: str):
         if isinstance(value, float) and value.is_integer():
             return int(value)
     elif hint is float:
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            return float(value)
+        number = _as_float(value)
+        if number is not None:
+            return number
     elif hint is str:
         if isinstance(value, str):
             return value

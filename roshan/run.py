@@ -64,6 +64,7 @@ class TrainConfig:
     auto_train: int = num(1, 1, doc="independent runs (seeds seed, seed+1, ...) in sequence, then evaluation")
     torch_threads: int = num(0, 0, doc="torch intra-op threads; 0 = torch's default")
     buffer_path: str = ""  # IQL: the replay buffer to learn from (``roshan eval --save-buffer``)
+    init_from: str = ""  # start from these network weights (a run folder's best or a checkpoint): fine-tuning
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,7 @@ from roshan.run import (
     config_of_checkpoint,
     load_checkpoint,
     new_run_dir,
+    resolve_checkpoint,
     save_checkpoint,
 )
 from roshan.runtime import ensure_taichi, init_taichi, torch_device
@@ -326,6 +327,8 @@ class Trainer:
         self.episodes = EpisodeLog(window=tc.objective_window)
         if resume_state is not None:
             self._restore(resume_state)
+        elif tc.init_from:
+            self._init_weights(tc.init_from)
         # A resumed run starts fresh episodes from a seed that depends on where it stopped.
         self.env = make_env(cfg, tc.num_envs, seed=tc.seed + 7919 * self.progress.updates)
         self.learner = make_learner(cfg, self.env, self.agent)
@@ -333,6 +336,16 @@ class Trainer:
         from torch.utils.tensorboard import SummaryWriter
 
         self.writer = SummaryWriter(str(self.run_dir / "tb"), purge_step=self.progress.env_steps or None)
+
+    def _init_weights(self, target: str) -> None:
+        """Fine-tuning: the networks (not optimisers, counters or the reward scaler) of another run's checkpoint."""
+        path = resolve_checkpoint(target)
+        state = load_checkpoint(path)
+        check_same_model(self.cfg, config_of_checkpoint(state, str(path)), str(path))
+        self.agent.load_state_dict(state["agent"], weights_only=True)
+        scaler = getattr(self.agent, "scaler", None)
+        if scaler is not None and "scaler" in state["agent"]:  # the values were learned on that reward scale
+            scaler.load_state_dict(state["agent"]["scaler"])
 
     def _restore(self, state: dict) -> None:
         self.agent.load_state_dict(state["agent"])

@@ -29,6 +29,11 @@ def test_set_overrides_nested_keys_and_parses_values():
     assert cfg.ignition.fire_percentage == 0.35
 
 
+def test_exponent_without_a_dot_is_a_float():
+    # YAML 1.1 reads "3e-5" as a string; a float field takes it anyway.
+    assert load_config(None, ["fire.dt=5e-2"]).fire.dt == pytest.approx(0.05)
+
+
 @pytest.mark.parametrize("override, words", [
     ("fire.dtt=0.1", ["unknown key", "'fire.dtt'", "did you mean 'fire.dt'"]),
     ("ignition.fire_percentag=0.1", ["did you mean 'ignition.fire_percentage'"]),
