@@ -28,6 +28,7 @@ from roshan.maps import load_map
 from roshan.runtime import ensure_taichi, torch_device
 
 CONTROLLERS = ("planner", "greedy")
+REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
 @dataclass(frozen=True)
@@ -73,10 +74,13 @@ class FrozenFlyPolicy:
     def __init__(self, target: str | Path):
         from roshan.evaluate import load_agent, policy_fn
 
-        if not Path(target).exists():
-            raise FileNotFoundError(f"planner low-level FlyAgent {target!r}: no such run folder or checkpoint "
+        path = Path(target)
+        if not path.exists() and not path.is_absolute() and (REPO_ROOT / path).exists():
+            path = REPO_ROOT / path  # configs name the shipped models relative to the repository
+        if not path.exists():
+            raise FileNotFoundError(f"planner low-level FlyAgent {str(target)!r}: no such run folder or checkpoint "
                                     "(set planner.fly_model / planner.explorer_model)")
-        self.config, agent, self.path = load_agent(target)
+        self.config, agent, self.path = load_agent(path)
         self.frames = self.config.fly.frames
         self._act = policy_fn(agent)
 
