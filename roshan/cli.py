@@ -206,10 +206,11 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
 @THREADS
 def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, frames_dir, gif_path, baseline, save_buffer,
              quiet, sets, arch, threads):
-    """Evaluate a trained FlyAgent (a run folder or a checkpoint file) with deterministic actions.
+    """Evaluate a trained FlyAgent or planner (a run folder or a checkpoint file) with deterministic actions.
 
     Prints a thesis-style table (success rate with its Wilson interval, failure reasons, TTE mean ± std
-    (median)); --set changes the evaluation setting (e.g. --set ignition.fire_percentage=0.05).
+    (median)); --set changes the evaluation setting (e.g. --set ignition.fire_percentage=0.05). For a planner
+    run, --baseline greedy plays the heuristic controller on the same episodes (same seed and envs).
     """
     from roshan import evaluate as ev
     from roshan import report

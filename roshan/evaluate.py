@@ -34,9 +34,13 @@ def load_agent(target: str | Path, which: str = "best"):
 
 
 def policy_fn(agent):
-    """Deterministic actions (B, 2) from a batch of drone observations, whatever the algorithm."""
+    """Deterministic actions from a batch of observations, whatever the algorithm: (B, 2) from flattened drone
+    observations for FlyAgents, (E, N) candidate indices for the planner."""
+    from roshan.algos.planner import PlannerPPO
     from roshan.algos.ppo import PPO
 
+    if isinstance(agent, PlannerPPO):
+        return lambda obs: agent.act(obs, deterministic=True)[0]
     if isinstance(agent, PPO):
         return lambda obs: agent.act(obs, deterministic=True)[0]
     return lambda obs: agent.act(obs)
@@ -59,8 +63,9 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
     from tqdm import tqdm
 
     bar = tqdm(total=quota * E, unit="episode", disable=not progress_bar, desc="eval")
+    flat = not getattr(env, "is_planner", False)  # FlyAgent policies see drones as a batch
     while int(done_count.min()) < quota:
-        actions = act(flatten_drones(obs)).view(E, N, 2)
+        actions = act(flatten_drones(obs)).view(E, N, 2) if flat else act(obs)
         obs, rewards, terms, truncs, info = env.step(actions)
         if on_step is not None:
             on_step(obs, actions, rewards, terms, truncs, info)
@@ -99,12 +104,27 @@ def baseline_fn(name: str, num_envs: int, num_drones: int, seed: int):
     the goal, roshan.env.heuristics)."""
     from roshan.env.heuristics import straight_to_goal
 
+    if name not in BASELINES:
+        raise ValueError(f"--baseline: expected one of {', '.join(BASELINES)}, got {name!r}")
+
     if name == "greedy":
         return lambda obs: straight_to_goal(obs["agent"].unsqueeze(1)).squeeze(1)
     if name == "random":
         g = torch.Generator().manual_seed(seed)
         return lambda obs: torch.rand(obs["agent"].shape[0], 2, generator=g) * 2.0 - 1.0
-    raise ValueError(f"--baseline: expected one of {', '.join(BASELINES)}, got {name!r}")
+    raise AssertionError(name)
+
+
+def planner_random_fn(seed: int):
+    """Uniformly random valid candidates per drone (the planner's random baseline)."""
+    g = torch.Generator().manual_seed(seed)
+
+    def act(obs):
+        count = obs["fires_mask"].sum(-1, keepdim=True)  # valid prefix length, groundstation included
+        u = torch.rand(obs["drones"].shape[:2], generator=g)
+        return (u * count).long().clamp(max=obs["fires_mask"].shape[-1] - 1)
+
+    return act
 
 
 def write_outputs(episodes: dict, out_dir: Path, title: str) -> dict:
@@ -118,11 +138,13 @@ def write_outputs(episodes: dict, out_dir: Path, title: str) -> dict:
     return summary
 
 
-def flyagent_json(summary: dict) -> dict:
-    """The issue's eval JSON: episodes, success_rate, failure_rates (collision, boundary, timeout), tte."""
+def flyagent_json(summary: dict, planner: bool = False) -> dict:
+    """The issue's eval JSON: episodes, success_rate, failure_rates (collision, boundary, timeout; the planner
+    adds burnout), tte."""
     fr = summary["failure_rates"]
+    reasons = ("collision", "boundary", "timeout") + (("burnout",) if planner else ())
     return {"episodes": summary["episodes"], "success_rate": summary["success_rate"],
-            "failure_rates": {k: fr.get(k, 0.0) for k in ("collision", "boundary", "timeout")},
+            "failure_rates": {k: fr.get(k, 0.0) for k in reasons},
             "tte": {k: summary["tte"][k] for k in ("mean", "std", "median")}}
 
 
@@ -135,15 +157,24 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
     With ``baseline`` (random | greedy) the scripted policy runs on the same episodes (same seed: same fire
     layouts and wind) and its summary is returned under ``"baseline"``.
     Returns the summary dict of :func:`roshan.report.summarize` plus ``checkpoint`` and ``out_dir``."""
+    from roshan.train import make_env
+
     cfg, agent, path = load_agent(target, which)
     cfg = apply_overrides(cfg, overrides) if overrides else cfg
     E = max(1, min(num_envs or cfg.train.eval_envs, episodes))
-    env = FlyVectorEnv(num_envs=E, config=cfg.env_config(), fly=cfg.fly, seed=seed)
+    env = make_env(cfg, E, seed, evaluation=True)
     if gif_path is not None and frames_dir is None:
         frames_dir = Path(gif_path).with_suffix("") / "frames"
     eps = run_episodes(env, policy_fn(agent), episodes, seed, frames_dir, progress_bar)
     base_eps = None
-    if baseline is not None:
+    if baseline is not None and getattr(env, "is_planner", False):
+        if baseline not in BASELINES:
+            raise ValueError(f"--baseline: expected one of {', '.join(BASELINES)}, got {baseline!r}")
+        # The heuristic runs in its own env with the same seed and env count: identical fire layouts and wind.
+        base_env = make_env(cfg, E, seed, evaluation=True, controller=baseline) if baseline == "greedy" else env
+        act = planner_random_fn(seed) if baseline == "random" else (lambda obs: torch.zeros(E, env.num_drones))
+        base_eps = run_episodes(base_env, act, episodes, seed, progress_bar=progress_bar)
+    elif baseline is not None:
         base_eps = run_episodes(env, baseline_fn(baseline, E, env.num_drones, seed), episodes, seed,
                                 progress_bar=progress_bar)
     env.close()
@@ -155,12 +186,13 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         scalars = report.read_tensorboard_scalars(tb)
         if scalars:
             report.plot_learning_curves(scalars, out / "learning_curves.png")
-    payload = flyagent_json(summary)
+    is_planner = getattr(env, "is_planner", False)
+    payload = flyagent_json(summary, is_planner)
     if base_eps is not None:
         base = write_outputs(base_eps, out / baseline, f"{baseline} baseline ({len(base_eps['reward'])} episodes, "
                                                          f"seed {seed})")
         report.plot_comparison({"policy": eps, baseline: base_eps}, out)
-        payload = {"policy": payload, baseline: flyagent_json(base)}
+        payload = {"policy": payload, baseline: flyagent_json(base, is_planner)}
         summary["baseline"] = base
     if json_path is not None:
         Path(json_path).parent.mkdir(parents=True, exist_ok=True)

@@ -21,6 +21,7 @@ from pathlib import Path
 import torch
 
 from roshan.algos.iql import IQLConfig
+from roshan.algos.planner import PlannerPPOConfig
 from roshan.algos.ppo import PPOConfig
 from roshan.algos.rnd import RNDConfig
 from roshan.algos.td3 import TD3Config
@@ -40,6 +41,7 @@ from roshan.config import (
     to_dict,
 )
 from roshan.env.fly import FlyConfig
+from roshan.env.planner import PlannerConfig
 
 CHECKPOINTS = ("latest", "best_reward", "best_objective", "best_eval")
 # What "best" means for evaluation: the periodic deterministic evaluation when the run had one (it measures the
@@ -51,9 +53,10 @@ BEST_ORDER = ("best_eval", "best_objective")
 class TrainConfig:
     """The training loop: batch of envs, budget, evaluation and seeds."""
 
-    algo: str = choice("ppo", ("ppo", "td3", "iql"))
+    algo: str = choice("ppo", ("ppo", "td3", "iql", "planner"), doc="planner: PPO on the PlannerAgent level")
     num_envs: int = num(64, 1, doc="environments stepped together")
-    total_steps: int = num(1_000_000, 0, doc="env steps (each moves every drone once); 0 = no limit")
+    total_steps: int = num(1_000_000, 0, doc="env steps (each moves every drone once; planner: decisions); "
+                                                "0 = no limit")
     max_updates: int = num(0, 0, doc="updates; 0 = no limit")
     max_minutes: float = num(0.0, 0.0, doc="wall-clock budget of one run; 0 = no limit")
     seed: int = num(0, 0, 2**31 - 1)
@@ -84,6 +87,8 @@ class RunConfig:
     td3: TD3Config = field(default_factory=TD3Config)
     iql: IQLConfig = field(default_factory=IQLConfig)
     rnd: RNDConfig = field(default_factory=RNDConfig)
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    planner_ppo: PlannerPPOConfig = field(default_factory=PlannerPPOConfig)
 
     def env_config(self) -> Config:
         return Config(map=self.map, fire=self.fire, wind=self.wind, ignition=self.ignition, drones=self.drones,

@@ -33,18 +33,29 @@ from roshan.run import (
 )
 from roshan.runtime import ensure_taichi, init_taichi, torch_device
 
-FAILURES = ("collision", "boundary", "timeout")
+FAILURES = ("collision", "boundary", "timeout", "burnout")
 
 
-def make_env(cfg: RunConfig, num_envs: int, seed: int) -> FlyVectorEnv:
+def make_env(cfg: RunConfig, num_envs: int, seed: int, evaluation: bool = False, controller: str = "planner"):
+    """The run's vector env: FlyAgent, or planner (``evaluation``: explorers fly and the candidates are the
+    detected fires; ``controller="greedy"``: the heuristic baseline)."""
+    if cfg.train.algo == "planner":
+        from roshan.env.planner import PlannerVectorEnv
+
+        return PlannerVectorEnv(num_envs, cfg.env_config(), cfg.planner, evaluation=evaluation,
+                                controller=controller, seed=seed)
     return FlyVectorEnv(num_envs=num_envs, config=cfg.env_config(), fly=cfg.fly, seed=seed)
 
 
 def make_agent(cfg: RunConfig, device: str | torch.device = "cpu"):
-    """The algorithm object of ``train.algo`` (PPO, TD3 or IQL) with fresh networks."""
+    """The algorithm object of ``train.algo`` (PPO, TD3, IQL or the planner's PPO) with fresh networks."""
     collision, frames = cfg.fly.collision, cfg.fly.frames
     if cfg.train.algo == "ppo":
         return PPO(cfg.ppo, collision, frames, device)
+    if cfg.train.algo == "planner":
+        from roshan.algos.planner import PlannerPPO
+
+        return PlannerPPO(cfg.planner_ppo, cfg.drones.num_drones, device)
     if cfg.train.algo == "td3":
         from roshan.algos.td3 import TD3
 
@@ -288,8 +299,73 @@ class IQLLearner:
         return self.cfg.iql.policy_freq * self.env.num_envs, metrics, np.concatenate(rows) if rows else empty
 
 
-def make_learner(cfg: RunConfig, env: FlyVectorEnv, agent):
-    return {"ppo": PPOLearner, "td3": TD3Learner, "iql": IQLLearner}[cfg.train.algo](cfg, env, agent)
+# ------------------------------------------------------------------------------------------------ planner
+
+
+class PlannerCollector:
+    """Planner rollouts: one transition per env and decision, stored [T, E, ...] (allocated once)."""
+
+    def __init__(self, env, agent, steps: int):
+        self.env, self.agent, self.T = env, agent, steps
+        E, N = env.num_envs, env.num_drones
+        obs, _ = env.reset()
+        self.obs = obs
+        dev = env.device
+        self.buf_obs = {k: torch.zeros((steps, *v.shape), device=dev) for k, v in obs.items()}
+        z = lambda *s, dt=torch.float32: torch.zeros(s, dtype=dt, device=dev)  # noqa: E731
+        self.actions = z(steps, E, N, dt=torch.long)
+        self.log_probs, self.values, self.rewards, self.trunc_values = (z(steps, E) for _ in range(4))
+        self.term, self.trunc, self.ended = (z(steps, E, dt=torch.bool) for _ in range(3))
+        self.stats = z(steps, E, len(EPISODE_FIELDS))
+
+    def collect(self, generator: torch.Generator):
+        from roshan.algos.planner import PlannerRollout
+
+        env, agent = self.env, self.agent
+        self.trunc_values.zero_()
+        for t in range(self.T):
+            for k, x in self.obs.items():
+                self.buf_obs[k][t].copy_(x)
+            a, logp, v = agent.act(self.obs, generator=generator)
+            self.actions[t], self.log_probs[t], self.values[t] = a, logp, v
+            self.obs, r, term, trunc, info = env.step(a)
+            self.rewards[t], self.term[t], self.trunc[t] = r, term, trunc
+            ended = info["_episode_stats"]
+            self.ended[t] = ended
+            if bool(ended.any()):
+                self.stats[t] = torch.stack([info["episode_stats"][k] for k in EPISODE_FIELDS], dim=-1)
+                if agent.cfg.bootstrap_truncated and bool(trunc.any()):
+                    self.trunc_values[t] = agent.value(info["final_obs"])
+        last = agent.value(self.obs)
+        next_values = torch.cat([self.values[1:], last.unsqueeze(0)])
+        next_values = torch.where(self.trunc, self.trunc_values, next_values)
+        return PlannerRollout(self.buf_obs, self.actions, self.log_probs, self.values, next_values, self.rewards,
+                              self.term, self.trunc)
+
+
+class PlannerLearner:
+    """One iteration = ``planner_ppo.horizon`` decisions over the envs, then one PPO update. Steps count
+    decisions (each is ``planner.interval`` low-level steps of every env)."""
+
+    def __init__(self, cfg: RunConfig, env, agent):
+        E = cfg.train.num_envs
+        self.steps = cfg.planner_ppo.horizon // E
+        if self.steps < 1 or self.steps * E != cfg.planner_ppo.horizon:
+            raise ValueError(f"planner_ppo.horizon = {cfg.planner_ppo.horizon} must be a positive multiple of "
+                             f"train.num_envs = {E}")
+        self.collector = PlannerCollector(env, agent, self.steps)
+        self.agent, self.env = agent, env
+
+    def iterate(self, generator: torch.Generator) -> tuple[int, dict, np.ndarray]:
+        rollout = self.collector.collect(generator)
+        metrics = self.agent.update(rollout, generator)
+        rows = ended_rows(self.collector.ended, self.collector.stats)
+        return self.steps * self.env.num_envs, metrics, rows
+
+
+def make_learner(cfg: RunConfig, env, agent):
+    learners = {"ppo": PPOLearner, "td3": TD3Learner, "iql": IQLLearner, "planner": PlannerLearner}
+    return learners[cfg.train.algo](cfg, env, agent)
 
 
 # ------------------------------------------------------------------------------------------------ the loop
@@ -440,7 +516,8 @@ class Trainer:
 
         tc = self.cfg.train
         if self.eval_env is None:
-            self.eval_env = make_env(self.cfg, min(tc.eval_envs, tc.eval_episodes), seed=tc.seed + 10_000)
+            self.eval_env = make_env(self.cfg, min(tc.eval_envs, tc.eval_episodes), seed=tc.seed + 10_000,
+                                     evaluation=True)
         episodes = run_episodes(self.eval_env, policy_fn(self.agent), tc.eval_episodes, seed=tc.seed + 10_000,
                                 progress_bar=False)
         summary = report.summarize(episodes)

@@ -280,6 +280,13 @@ class FlyKernels:
         episode[e, EP_RETURN] = self.ret[e]
 
 
+def fly_obs_views(buf: torch.Tensor, num_drones: int) -> dict[str, torch.Tensor]:
+    """The observation dict of FlyAgent frames: views of ``buf`` (E, N, T, frame_width(N))."""
+    n, k = num_drones, observe.OWN_FEATURES
+    return {"agent": buf[..., :k], "neighbors": buf[..., k:k + 4 * n].unflatten(-1, (n, 4)),
+            "neighbors_mask": buf[..., k + 4 * n:]}
+
+
 class FlyVectorEnv(gym.vector.VectorEnv):
     """E FlyAgent environments as one Gymnasium vector env whose tensors are shared with torch.
 
@@ -351,10 +358,7 @@ class FlyVectorEnv(gym.vector.VectorEnv):
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)
 
     def _views(self, buf: torch.Tensor) -> dict[str, torch.Tensor]:
-        n, k = self.num_drones, observe.OWN_FEATURES
-        e, _, t, _ = buf.shape
-        return {"agent": buf[..., :k], "neighbors": buf[..., k:k + 4 * n].unflatten(-1, (n, 4)),
-                "neighbors_mask": buf[..., k + 4 * n:]}
+        return fly_obs_views(buf, self.num_drones)
 
     # ------------------------------------------------------------------------------------------ gymnasium
 

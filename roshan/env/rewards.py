@@ -1,4 +1,5 @@
-"""FlyAgent reward terms and their coefficient sets (agents.md 8): the one place rewards are defined.
+"""FlyAgent (agents.md 8) and PlannerAgent (agents.md 13.5) reward terms and their coefficient sets: the one
+place rewards are defined.
 
 The coefficients are compile-time constants of the step kernel; :func:`fly_reward` is the ``ti.func`` it
 calls once per drone per step.
@@ -101,3 +102,91 @@ def proximity_sum(entry) -> ti.f32:
         if ti.abs(entry[k]) < PROXIMITY_THRESHOLD:
             s += ti.abs(entry[k])
     return s
+
+
+# ---------------------------------------------------------------------------------------------- PlannerAgent
+
+# agents.md 13.5: thesis Table 5.7 (best Optuna trial, P1 "Default") and Table 5.9 (mean of the top-10 trials,
+# the thesis-era and newest configs). The newest code's extra terms have one default set.
+PLANNER_PRESETS: dict[str, dict[str, float]] = {
+    "optuna_best": {"goal": 4.656, "burned": -0.886, "ground": -0.236, "timeout": -0.435, "same": -1.913,
+                    "extinguish": 0.523, "fast": 0.523},
+    "optuna_top10": {"goal": 3.9105863581302542, "burned": -2.1999479401238373, "ground": -0.29328248592328265,
+                     "timeout": -2.3843039593546047, "same": -1.552461776799054, "extinguish": 0.6054212968617818,
+                     "fast": 0.21654104693212245},
+}
+PLANNER_NEWEST_TERMS = {"distance": 0.1, "spread": 0.05, "refill": 0.5, "empty": -0.05}
+
+
+@dataclass(frozen=True)
+class PlannerRewardConfig:
+    """Planner reward: a preset of the thesis terms (any field set here overrides it); ``version = newest`` adds
+    DistanceProgress, SpreadPrevention (and with the water limit WaterRefill, EmptyTank) and makes the
+    groundstation and same-goal terms per drone as in the newest code."""
+
+    preset: str = choice("optuna_top10", tuple(PLANNER_PRESETS))
+    version: str = choice("thesis", ("thesis", "newest"))
+    goal: float | None = None  # GoalReached
+    burned: float | None = None  # MapBurnedTooMuch
+    ground: float | None = None  # FlyingTowardsGroundStation
+    timeout: float | None = None  # TimeOut
+    same: float | None = None  # SameGoalPenalty
+    extinguish: float | None = None  # ExtinguishFires, per cell
+    fast: float | None = None  # FastExtinguish, times the remaining fraction of the step limit
+    distance: float | None = None  # DistanceProgress (newest)
+    spread: float | None = None  # SpreadPrevention (newest)
+    refill: float | None = None  # WaterRefill (newest, water limit)
+    empty: float | None = None  # EmptyTank (newest, water limit)
+
+
+@dataclass(frozen=True)
+class PlannerCoefficients:
+    goal: float
+    burned: float
+    ground: float
+    timeout: float
+    same: float
+    extinguish: float
+    fast: float
+    distance: float
+    spread: float
+    refill: float
+    empty: float
+    newest: bool
+
+    @classmethod
+    def resolve(cls, cfg: PlannerRewardConfig) -> "PlannerCoefficients":
+        values = {**PLANNER_PRESETS[cfg.preset], **PLANNER_NEWEST_TERMS}
+        for f in fields(PlannerRewardConfig):
+            v = getattr(cfg, f.name)
+            if f.name not in ("preset", "version") and v is not None:
+                values[f.name] = float(v)
+        return cls(**values, newest=cfg.version == "newest")
+
+
+@ti.func
+def planner_outcome_reward(coef: ti.template(), objective: ti.i32, timed_out: ti.i32, terminal: ti.i32,
+                           remaining_fraction: ti.f32) -> ti.f32:
+    """The exclusive outcome terms of agents.md 13.5: GoalReached + FastExtinguish, else TimeOut, else
+    MapBurnedTooMuch (burnout, or the fires died out on their own)."""
+    r = 0.0
+    if objective != 0:
+        r = coef.goal + coef.fast * remaining_fraction
+    elif timed_out != 0:
+        r = coef.timeout
+    elif terminal != 0:
+        r = coef.burned
+    return r
+
+
+@ti.func
+def planner_step_reward(coef: ti.template(), to_ground: ti.f32, duplicates: ti.i32, extinguished: ti.i32,
+                        distance_gain: ti.f32, burning_drop: ti.f32, refilled: ti.f32, empty_tanks: ti.i32) -> ti.f32:
+    """The terms paid at every planner step. Thesis-era: ``to_ground`` is 1 if any drone's goal is the
+    groundstation; newest: the sum over such drones of their water fraction where it exceeds 0.5.
+    ``duplicates`` = N - distinct goals (newest: among goals other than the groundstation)."""
+    r = coef.ground * to_ground + coef.same * duplicates + coef.extinguish * extinguished
+    if ti.static(coef.newest):
+        r += coef.distance * distance_gain + coef.spread * burning_drop + coef.refill * refilled
+        r += coef.empty * empty_tanks
+    return r

@@ -1,0 +1,450 @@
+"""PlannerAgent level (agents.md 10.2, 11, 13): goal assignment, the low-level steps of planner drones and
+explorers, planner rewards, termination and the planner observation, batched over envs.
+
+One planner step of env e is ``apply`` (the chosen candidates become the drones' goals), ``interval`` calls of
+``low_step`` (the fire, the explorers and the planner drones each advance once; the env's Python side runs the
+frozen FlyAgent policies in between), then ``finish`` (reward, termination, a fresh observation). With the
+greedy controller (the heuristic baseline of agents.md 10.2) ``apply`` is skipped, the drones pick their own
+goals inside ``low_step`` and an episode may end at any low-level step.
+
+Deliberate differences from the reference (agents.md 13.1, 13.5):
+- the observation is built after the interval from the state it ends in (the reference shows the planner the
+  fires of the previous decision and goals of the one before: the stale-observation defect);
+- the reward of a decision pays what happened in the interval it started (extinguished cells, spread), not
+  the interval before it.
+
+The planner observation is one flat float row per env (see :func:`obs_layout`): drone positions, goals, water
+fraction, the candidate list (index 0 = groundstation, then fire cells in row-major order), its validity mask
+and 5 global features. Positions are normalised by the map: ``2 q / max(rows, cols) - 1``.
+"""
+
+import math
+
+import taichi as ti
+
+from roshan.env.rewards import planner_outcome_reward, planner_step_reward
+from roshan.kernels import observe
+from roshan.kernels.drones import DroneSim
+from roshan.kernels.explore import ExploreMaps
+from roshan.kernels.fire import N_BURNED, N_BURNING, N_EXTINGUISHED, FireSim
+
+# Failure reasons, indices into roshan.env.fly.REASONS.
+TIMEOUT, BURNOUT = 1, 3
+EP_SUCCESS, EP_REASON, EP_STEPS, EP_BURNED, EP_EXTINGUISHED, EP_RETURN = range(6)
+GROUND_GOAL = -2  # goal_cell of a drone sent to the groundstation by the planner
+
+
+def obs_layout(num_drones: int, max_candidates: int) -> dict[str, tuple[int, int]]:
+    """(start, end) column of every observation part in the flat row."""
+    n, k = num_drones, max_candidates
+    parts = {"drones": 2 * n, "goals": 2 * n, "water": n, "fires": 2 * k, "fires_mask": k, "globals": 5}
+    out, start = {}, 0
+    for name, width in parts.items():
+        out[name] = (start, start + width)
+        start += width
+    return out
+
+
+@ti.data_oriented
+class PlannerKernels:
+    """The planner level over a FireSim, the planner drones and the explorer drones of the same envs.
+
+    Args:
+        fire, drones, explorers: the simulator and the two drone groups (same envs).
+        maps: the fire map and meander waypoints (its drone group is ``explorers``).
+        interval: low-level steps per planner step (``hierarchy_timesteps``).
+        t_max: low-level step limit of an episode.
+        coef: :class:`roshan.env.rewards.PlannerCoefficients`.
+        greedy: the drones follow the heuristic state machine (agents.md 10.2) instead of planner goals.
+        move_explorers: step the explorers (evaluation); in planner training they stay at the groundstation.
+        detected: the candidates are the fire map's cells (fires some drone has seen) instead of all burning
+            cells (centralised training).
+        burnout: burned-out fraction of the map that fails the episode.
+        max_candidates: length K of the candidate list (groundstation included).
+        fly_frames, explore_frames: stacked FlyAgent frames of each group's policy.
+    """
+
+    def __init__(self, fire: FireSim, drones: DroneSim, explorers: DroneSim, maps: ExploreMaps, *, interval: int,
+                 t_max: int, coef, greedy: bool, move_explorers: bool, detected: bool, burnout: float,
+                 max_candidates: int, fly_frames: int, explore_frames: int):
+        self.fire, self.drones, self.explorers, self.maps = fire, drones, explorers, maps
+        self.interval, self.t_max, self.coef = interval, t_max, coef
+        self.greedy, self.move_explorers, self.detected = greedy, move_explorers, detected
+        self.burnout = burnout
+        self.K = max_candidates
+        self.fly_frames, self.explore_frames = fly_frames, explore_frames
+        self.use_water = drones.use_water
+        self.layout = obs_layout(drones.num_drones, max_candidates)
+        self.o_drones, self.o_goals, self.o_water, self.o_fires, self.o_mask, self.o_globals = (
+            self.layout[k][0] for k in ("drones", "goals", "water", "fires", "fires_mask", "globals"))
+        self.norm = 2.0 / max(fire.rows, fire.cols)  # norm(q) = q * norm - 1
+        self.log_cells = math.log(1.0 + fire.num_cells)
+        E, N = fire.num_envs, drones.num_drones
+        self.ended = ti.field(ti.i32, E)  # the episode ended: restart() resets the env
+        self.finished = ti.field(ti.i32, E)  # greedy: ended inside this planner step, skip the rest of it
+        self.remaining = ti.field(ti.i32, E)
+        self.steps = ti.field(ti.i32, E)  # low-level steps so far (TTE)
+        self.ret = ti.field(ti.f32, E)
+        self.objective = ti.field(ti.i32, E)  # a drone put out the last burning cell in this planner step
+        self.ext_count = ti.field(ti.i32, E)  # cells extinguished in this planner step
+        self.step_terms = ti.field(ti.f32, E)  # goal-dependent reward terms of the current decision
+        self.mean_dist = ti.field(ti.f32, E)  # newest DistanceProgress: mean goal distance after the last decision
+        self.prev_burning = ti.field(ti.i32, E)
+        self.decisions = ti.field(ti.i32, E)  # planner steps in this episode
+        self.prev_water = ti.field(ti.f32, (E, N))
+        self.cand_cell = ti.field(ti.i32, (E, max_candidates))  # flat cell of candidate k (k >= 1)
+        self.cand_count = ti.field(ti.i32, E)  # valid candidates, groundstation included
+
+    # ------------------------------------------------------------------------------------------ kernels
+
+    @ti.kernel
+    def restart(self, obs: ti.types.ndarray(dtype=ti.f32, ndim=2), final_obs: ti.types.ndarray(dtype=ti.f32, ndim=2),
+                obs_fly: ti.types.ndarray(dtype=ti.f32, ndim=4), obs_explore: ti.types.ndarray(dtype=ti.f32, ndim=4),
+                seed_key: ti.u32, keep_final: ti.i32):
+        """Reset the envs flagged in ``ended``, first copying their planner observation to ``final_obs``."""
+        for v in range(self.fire.num_envs * self.fire.env_pad):
+            e = v // self.fire.env_pad
+            if v % self.fire.env_pad == 0 and self.ended[e] != 0:
+                if keep_final != 0:
+                    for k in range(obs.shape[1]):
+                        final_obs[e, k] = obs[e, k]
+                self.new_episode(obs, obs_fly, obs_explore, e, seed_key)
+                self.ended[e] = 0
+
+    @ti.kernel
+    def apply(self, actions: ti.types.ndarray(dtype=ti.i64, ndim=2)):
+        """The planner's candidate indices become the drones' goals; the goal-dependent reward terms are
+        evaluated now, on the decision itself (agents.md 13.5)."""
+        for e in range(self.fire.num_envs):
+            self.assign_goals(actions, e)
+
+    @ti.kernel
+    def low_step(self, act_fly: ti.types.ndarray(dtype=ti.f32, ndim=3),
+                 act_explore: ti.types.ndarray(dtype=ti.f32, ndim=3), obs_fly: ti.types.ndarray(dtype=ti.f32, ndim=4),
+                 obs_explore: ti.types.ndarray(dtype=ti.f32, ndim=4), rewards: ti.types.ndarray(dtype=ti.f32, ndim=1),
+                 dones: ti.types.ndarray(dtype=ti.u8, ndim=2), episode: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        for v in range(self.fire.num_envs * self.fire.env_pad):
+            e = v // self.fire.env_pad
+            if v % self.fire.env_pad == 0 and self.finished[e] == 0:
+                self.low_step_env(act_fly, act_explore, obs_fly, obs_explore, rewards, dones, episode, e)
+
+    @ti.kernel
+    def finish(self, obs: ti.types.ndarray(dtype=ti.f32, ndim=2), rewards: ti.types.ndarray(dtype=ti.f32, ndim=1),
+               dones: ti.types.ndarray(dtype=ti.u8, ndim=2), episode: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        """End of a planner step: reward and termination (planner controller), then a fresh observation."""
+        for e in range(self.fire.num_envs):
+            if ti.static(not self.greedy):
+                self.planner_outcome(rewards, dones, episode, e)
+            if self.finished[e] != 0:
+                self.ended[e] = 1
+            self.finished[e] = 0
+            self.build_obs(obs, e)
+
+    @ti.kernel
+    def begin(self, rewards: ti.types.ndarray(dtype=ti.f32, ndim=1), dones: ti.types.ndarray(dtype=ti.u8, ndim=2)):
+        """Clear the per-step outputs and counters before the low-level steps of a planner step."""
+        for e in range(self.fire.num_envs):
+            rewards[e] = 0.0
+            dones[e, 0] = ti.u8(0)
+            dones[e, 1] = ti.u8(0)
+            self.objective[e] = 0
+            self.ext_count[e] = 0
+            self.finished[e] = 0
+
+    # ------------------------------------------------------------------------------------------ episodes
+
+    @ti.func
+    def new_episode(self, obs: ti.template(), obs_fly: ti.template(), obs_explore: ti.template(), e,
+                    seed_key: ti.u32):
+        """agents.md 4: fire, groundstation, drones (planner drones towards the nearest true fires, or the
+        groundstation for the heuristic, whose fire map is empty), explorers on their first waypoint."""
+        dr, ex = self.drones, self.explorers
+        self.fire.reset_env(e, seed_key)
+        dr.place(e)
+        ex.place(e)
+        self.maps.reset_env(e, ex)
+        for d in range(dr.num_drones):
+            if ti.static(self.greedy):
+                dr.goal[e, d] = dr.groundstation_centre(e)
+                dr.goal_cell[e, d] = -1
+            else:
+                dr.next_fire(e, d)
+            dr.prev_dist[e, d] = dr.distance_to_goal(e, d)
+            self.prev_water[e, d] = dr.water[e, d]
+        dr.update_neighbours(e)
+        ex.update_neighbours(e)
+        self.maps.observe_all(e, ex)  # what the drones see where they start
+        self.maps.observe_all(e, dr)
+        for d in range(dr.num_drones):
+            observe.fill_frames(obs_fly, dr, e, d, self.fly_frames)
+        for d in range(ex.num_drones):
+            observe.fill_frames(obs_explore, ex, e, d, self.explore_frames)
+        self.remaining[e] = self.t_max
+        self.steps[e] = 0
+        self.ret[e] = 0.0
+        self.decisions[e] = 0
+        self.finished[e] = 0
+        self.prev_burning[e] = self.fire.counts[e, N_BURNING]
+        self.mean_dist[e] = self.mean_goal_distance(e)
+        self.build_obs(obs, e)
+
+    @ti.func
+    def record_episode(self, episode: ti.template(), dones: ti.template(), e, success, reason):
+        """Write env e's episode record; a pure timeout truncates, every other end terminates."""
+        episode[e, EP_SUCCESS] = ti.cast(success, ti.f32)
+        episode[e, EP_REASON] = ti.cast(reason, ti.f32)
+        episode[e, EP_STEPS] = ti.cast(self.steps[e], ti.f32)
+        episode[e, EP_BURNED] = ti.cast(self.fire.counts[e, N_BURNED], ti.f32) / self.fire.num_cells
+        episode[e, EP_EXTINGUISHED] = ti.cast(self.fire.counts[e, N_EXTINGUISHED], ti.f32)
+        episode[e, EP_RETURN] = self.ret[e]
+        dones[e, 0] = ti.cast(reason != TIMEOUT, ti.u8)
+        dones[e, 1] = ti.cast(reason == TIMEOUT, ti.u8)
+        self.finished[e] = 1
+
+    @ti.func
+    def end_reason(self, e, timed_out) -> ti.types.vector(2, ti.i32):
+        """agents.md 13.6 (later rules overwrite the reason): (terminal, reason)."""
+        terminal = self.objective[e]
+        reason = 0
+        if ti.cast(self.fire.counts[e, N_BURNED], ti.f32) > self.burnout * self.fire.num_cells:
+            terminal = 1
+            reason = BURNOUT
+        if timed_out != 0:
+            terminal = 1
+            reason = TIMEOUT
+        if self.fire.counts[e, N_BURNING] == 0:
+            terminal = 1  # put out, or burned down on its own
+        return ti.Vector([terminal, reason])
+
+    @ti.func
+    def planner_outcome(self, rewards: ti.template(), dones: ti.template(), episode: ti.template(), e):
+        """Reward and termination of a planner decision after its interval."""
+        self.remaining[e] -= self.interval
+        self.decisions[e] += 1
+        timed_out = ti.cast(self.remaining[e] <= 0, ti.i32)
+        end = self.end_reason(e, timed_out)
+        frac = ti.max(ti.cast(self.remaining[e], ti.f32), 0.0) / self.t_max
+        r = planner_outcome_reward(self.coef, self.objective[e], timed_out, end[0], frac)
+        burning = self.fire.counts[e, N_BURNING]
+        drop = ti.cast(self.prev_burning[e] - burning, ti.f32)
+        self.prev_burning[e] = burning
+        refilled = 0.0
+        empty = 0
+        dr = self.drones
+        for d in range(dr.num_drones):
+            if ti.static(self.use_water):
+                refilled += ti.max(0.0, dr.water[e, d] - self.prev_water[e, d]) / dr.capacity
+                empty += ti.cast(dr.water[e, d] <= 0.0, ti.i32)
+            self.prev_water[e, d] = dr.water[e, d]
+        r += self.step_terms[e] + planner_step_reward(self.coef, 0.0, 0, self.ext_count[e], 0.0, drop, refilled,
+                                                      empty)
+        rewards[e] = r
+        self.ret[e] += r
+        if end[0] != 0:
+            self.record_episode(episode, dones, e, ti.cast(end[1] == 0, ti.i32), end[1])
+
+    # ------------------------------------------------------------------------------------------ decisions
+
+    @ti.func
+    def assign_goals(self, actions: ti.template(), e):
+        """agents.md 13.4: candidate 0 (and any index past the valid list) is the groundstation."""
+        dr = self.drones
+        gs = dr.groundstation_centre(e)
+        for d in range(dr.num_drones):
+            k = ti.cast(actions[e, d], ti.i32)
+            if k >= 1 and k < self.cand_count[e]:
+                c = self.cand_cell[e, k]
+                dr.goal_cell[e, d] = c
+                dr.goal[e, d] = self.cell_centre(c)
+            else:
+                dr.goal_cell[e, d] = GROUND_GOAL
+                dr.goal[e, d] = gs
+            dr.prev_dist[e, d] = dr.distance_to_goal(e, d)
+        # FlyingTowardsGroundStation and SameGoalPenalty judge this decision.
+        to_ground = 0.0
+        duplicates = 0
+        for d in range(dr.num_drones):
+            ground = ti.cast(dr.goal_cell[e, d] == GROUND_GOAL, ti.i32)
+            if ti.static(self.coef.newest):
+                w = 1.0
+                if ti.static(self.use_water):
+                    w = ti.min(dr.water[e, d] / dr.capacity, 1.0)
+                if ground != 0 and w > 0.5:
+                    to_ground += w
+            elif ground != 0:
+                to_ground = 1.0
+            skip = 0
+            if ti.static(self.coef.newest):
+                skip = ground  # the newest code lets several drones wait at the groundstation
+            if skip == 0:
+                for j in range(d):  # a duplicate if an earlier drone has the same goal
+                    if dr.goal_cell[e, j] == dr.goal_cell[e, d]:
+                        duplicates += 1
+                        break
+        gain = 0.0
+        if ti.static(self.coef.newest):
+            m = self.mean_goal_distance(e)
+            if self.decisions[e] > 0:
+                gain = self.mean_dist[e] - m
+            self.mean_dist[e] = m
+        self.step_terms[e] = planner_step_reward(self.coef, to_ground, duplicates, 0, gain, 0.0, 0.0, 0)
+
+    @ti.func
+    def cell_centre(self, c):
+        """Grid coordinates (row, col) of the centre of flat cell c."""
+        return ti.Vector([ti.cast(c // self.fire.cols, ti.f32), ti.cast(c % self.fire.cols, ti.f32)]) + 0.5
+
+    @ti.func
+    def mean_goal_distance(self, e) -> ti.f32:
+        dr = self.drones
+        s = 0.0
+        for d in range(dr.num_drones):
+            s += dr.distance_to_goal(e, d)
+        return s / dr.num_drones / max(self.fire.rows, self.fire.cols)
+
+    # ------------------------------------------------------------------------------------------ low level
+
+    @ti.func
+    def low_step_env(self, act_fly: ti.template(), act_explore: ti.template(), obs_fly: ti.template(),
+                     obs_explore: ti.template(), rewards: ti.template(), dones: ti.template(), episode: ti.template(),
+                     e):
+        """One fire update and one move of every active drone of env e (agents.md 2, 13.1)."""
+        dr, ex = self.drones, self.explorers
+        self.fire.step_env(e)
+        self.steps[e] += 1
+        if ti.static(self.move_explorers):
+            self.maps.advance_if_reached(e, ex)
+            for x in range(ex.num_drones):
+                ex.move_drone(e, x, ti.Vector([act_explore[e, x, 0], act_explore[e, x, 1]]))
+                self.maps.observe_drone(e, ex, x)
+            ex.update_neighbours(e)
+            for x in range(ex.num_drones):
+                observe.push_frame(obs_explore, ex, e, x, self.explore_frames)
+        for d in range(dr.num_drones):
+            dr.move_drone(e, d, ti.Vector([act_fly[e, d, 0], act_fly[e, d, 1]]))
+            self.maps.observe_drone(e, dr, d)
+            if ti.static(self.greedy):
+                self.heuristic(e, d)
+            else:  # PlannerFlyAgents drop water on every burning cell they fly over (agents.md 7)
+                if dr.extinguish_here(e, d) != 0:
+                    self.objective[e] = 1
+                self.ext_count[e] += dr.extinguished[e, d]
+        dr.update_neighbours(e)
+        for d in range(dr.num_drones):
+            observe.push_frame(obs_fly, dr, e, d, self.fly_frames)
+        if ti.static(self.greedy):
+            self.remaining[e] -= 1
+            end = self.end_reason(e, ti.cast(self.remaining[e] <= 0, ti.i32))
+            if end[0] != 0:
+                self.record_episode(episode, dones, e, ti.cast(end[1] == 0, ti.i32), end[1])
+
+    @ti.func
+    def heuristic(self, e, d):
+        """agents.md 10.2 without the water limit (RECHARGE fills at once): a drone waiting at the groundstation
+        takes the nearest known fire as soon as there is one; a drone at its goal drops water there and takes
+        the next known fire (the groundstation if none is free)."""
+        dr = self.drones
+        gs = dr.groundstation_centre(e)
+        g = dr.goal[e, d]
+        if ti.abs(g[0] - gs[0]) < 0.25 and ti.abs(g[1] - gs[1]) < 0.25 and self.maps.known_fires[e] > 0:
+            self.next_known_fire(e, d)
+        elif dr.at_goal(e, d) != 0:
+            if dr.extinguish_here(e, d) != 0:
+                self.objective[e] = 1
+            if dr.extinguished[e, d] != 0:
+                self.ext_count[e] += 1
+                c = dr.cell_of(e, d)  # put out: no longer a known fire
+                i = c // self.fire.cols
+                j = c % self.fire.cols
+                if self.maps.fire_map[e, i, j] != 0:
+                    self.maps.fire_map[e, i, j] = ti.i8(0)
+                    self.maps.known_fires[e] -= 1
+            dr.goal_cell[e, d] = -1
+            self.next_known_fire(e, d)
+
+    @ti.func
+    def next_known_fire(self, e, d):
+        """agents.md 10.1 over the fire map: the nearest known fire cell (squared index distance from the
+        drone's cell, first of equals in row-major order) that no other drone holds while it still burns."""
+        dr = self.drones
+        p = dr.pos[e, d] / dr.cell
+        pi = ti.floor(p[0])
+        pj = ti.floor(p[1])
+        best = -1
+        best_d2 = 0.0
+        cols = self.fire.cols
+        for c in range(self.fire.num_cells):
+            if self.maps.fire_map[e, c // cols, c % cols] != 0:
+                free = 1
+                for other in range(dr.num_drones):
+                    if other != d and dr.goal_cell[e, other] == c and self.fire.is_burning(e, c) != 0:
+                        free = 0
+                if free != 0:
+                    di = ti.cast(c // cols, ti.f32) - pi
+                    dj = ti.cast(c % cols, ti.f32) - pj
+                    d2 = di * di + dj * dj
+                    if best < 0 or d2 < best_d2:
+                        best = c
+                        best_d2 = d2
+        dr.goal_cell[e, d] = best
+        goal = dr.groundstation_centre(e)
+        if best >= 0:
+            goal = self.cell_centre(best)
+        dr.goal[e, d] = goal
+
+    # ------------------------------------------------------------------------------------------ observation
+
+    @ti.func
+    def build_obs(self, obs: ti.template(), e):
+        """The planner observation of env e (agents.md 13.3) and its candidate list."""
+        dr = self.drones
+        for d in range(dr.num_drones):
+            p = dr.pos[e, d] / dr.cell
+            g = dr.goal[e, d]
+            for a in ti.static(range(2)):
+                obs[e, self.o_drones + 2 * d + a] = p[a] * self.norm - 1.0
+                obs[e, self.o_goals + 2 * d + a] = g[a] * self.norm - 1.0
+            w = 1.0
+            if ti.static(self.use_water):
+                w = ti.math.clamp(dr.water[e, d] / dr.capacity, 0.0, 1.0)
+            obs[e, self.o_water + d] = w
+        f0 = self.o_fires
+        m0 = self.o_mask
+        gs = dr.groundstation_centre(e)
+        obs[e, f0] = gs[0] * self.norm - 1.0
+        obs[e, f0 + 1] = gs[1] * self.norm - 1.0
+        obs[e, m0] = 1.0
+        k = 1
+        cols = self.fire.cols
+        centroid = ti.Vector([0.0, 0.0])
+        for c in range(self.fire.num_cells):
+            listed = 0
+            if ti.static(self.detected):
+                listed = ti.cast(self.maps.fire_map[e, c // cols, c % cols] != 0, ti.i32)
+            else:
+                listed = self.fire.is_burning(e, c)
+            if listed != 0 and k < self.K:
+                centre = self.cell_centre(c)
+                self.cand_cell[e, k] = c
+                obs[e, f0 + 2 * k] = centre[0] * self.norm - 1.0
+                obs[e, f0 + 2 * k + 1] = centre[1] * self.norm - 1.0
+                obs[e, m0 + k] = 1.0
+                centroid += centre
+                k += 1
+        self.cand_count[e] = k
+        for j in range(k, self.K):
+            obs[e, f0 + 2 * j] = 0.0
+            obs[e, f0 + 2 * j + 1] = 0.0
+            obs[e, m0 + j] = 0.0
+        n_fires = k - 1
+        g0 = self.o_globals
+        obs[e, g0] = ti.math.clamp(ti.log(1.0 + n_fires) / self.log_cells, 0.0, 1.0)
+        if n_fires > 0:
+            centroid = centroid / n_fires * self.norm - 1.0
+        else:
+            centroid = ti.Vector([-2.0, -2.0])
+        obs[e, g0 + 1] = centroid[0]
+        obs[e, g0 + 2] = centroid[1]
+        wind = ti.math.clamp(self.fire.wind[e] / 20.0, -1.0, 1.0)
+        obs[e, g0 + 3] = wind[0]
+        obs[e, g0 + 4] = wind[1]

@@ -1,0 +1,226 @@
+"""Planner networks (masking, pointer decoding, log-prob consistency) and planner PPO on a tiny bandit."""
+
+import pytest
+import torch
+
+from roshan.algos.planner import (
+    PlannerPPO,
+    PlannerPPOConfig,
+    PlannerRollout,
+    PointerPlannerNet,
+    ThesisPlannerNet,
+    trim_candidates,
+)
+
+NETS = [ThesisPlannerNet, PointerPlannerNet]
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    """These networks are tiny: one intra-op thread is faster and does not fight other jobs for the CPU."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def random_obs(B: int, N: int, K: int, g: torch.Generator, n_valid: torch.Tensor | None = None) -> dict:
+    """Observations with a random valid prefix (1..K candidates, index 0 = groundstation) and zero padding."""
+    if n_valid is None:
+        n_valid = torch.randint(1, K + 1, (B,), generator=g)
+    mask = (torch.arange(K) < n_valid.unsqueeze(1)).float()
+    fires = (torch.rand(B, K, 2, generator=g) * 2 - 1) * mask.unsqueeze(-1)
+    return {"drones": torch.rand(B, N, 2, generator=g) * 2 - 1, "goals": torch.rand(B, N, 2, generator=g) * 2 - 1,
+            "water": torch.rand(B, N, 1, generator=g), "fires": fires, "fires_mask": mask,
+            "globals": torch.rand(B, 5, generator=g) * 2 - 1}
+
+
+def pad(obs: dict, extra: int) -> dict:
+    """The same observations with ``extra`` more zero-padded candidates."""
+    out = dict(obs)
+    out["fires"] = torch.cat([obs["fires"], torch.zeros(obs["fires"].shape[0], extra, 2)], dim=1)
+    out["fires_mask"] = torch.cat([obs["fires_mask"], torch.zeros(obs["fires_mask"].shape[0], extra)], dim=1)
+    return out
+
+
+def test_trim_candidates_cuts_to_the_longest_valid_prefix():
+    g = torch.Generator().manual_seed(0)
+    obs = random_obs(3, 2, 10, g, n_valid=torch.tensor([1, 4, 2]))
+    trimmed = trim_candidates(obs)
+    assert trimmed["fires"].shape == (3, 4, 2) and trimmed["fires_mask"].shape == (3, 4)
+    assert trimmed["drones"] is obs["drones"]
+    only_groundstation = trim_candidates(random_obs(2, 2, 10, g, n_valid=torch.tensor([1, 1])))
+    assert only_groundstation["fires"].shape[1] == 1
+
+
+@torch.no_grad()
+@pytest.mark.parametrize("net_cls", NETS)
+def test_linear_layers_are_orthogonal_with_the_reference_gains(net_cls):
+    net = net_cls(3)
+    value_out = net.value_head if net_cls is ThesisPlannerNet else net.value_head[-1]
+    linears = [m for m in net.modules() if isinstance(m, torch.nn.Linear)]
+    assert len(linears) >= 5
+    for m in linears:  # includes the output projections inside nn.MultiheadAttention
+        gain2 = 1.0 if m is value_out else 2.0
+        w = m.weight if m.weight.shape[0] <= m.weight.shape[1] else m.weight.T
+        torch.testing.assert_close(w @ w.T, gain2 * torch.eye(w.shape[0]), atol=1e-5, rtol=0)
+        assert bool((m.bias == 0).all())
+    if net_cls is PointerPlannerNet:
+        assert float(net.log_temperature) == 0.0 and float(net.log_penalty) == pytest.approx(1.6)
+
+
+@torch.no_grad()
+def test_thesis_net_masks_padding_and_the_groundstation_while_a_fire_is_listed():
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(0)
+    N, K = 3, 7
+    net = ThesisPlannerNet(N)
+    n_valid = torch.tensor([1, 2, 5, 7, 1, 3])
+    obs = random_obs(6, N, K, g, n_valid)
+    probs = net.probs(obs)
+    allowed = torch.arange(K) < n_valid.unsqueeze(1)
+    allowed[:, 0] = n_valid == 1  # the groundstation only when no fire is listed
+    assert bool((probs[~allowed.unsqueeze(1).expand_as(probs)] == 0).all())
+    torch.testing.assert_close(probs.sum(-1), torch.ones(6, N))
+    for _ in range(50):
+        actions, logp, entropy, _ = net.forward_act(obs, generator=g)
+        assert bool(allowed.gather(1, actions).all())
+        assert bool(torch.isfinite(logp).all()) and bool(torch.isfinite(entropy).all())
+    actions = net.forward_act(obs, deterministic=True)[0]
+    assert bool((actions[n_valid == 1] == 0).all()) and bool((actions[n_valid > 1] != 0).all())
+
+
+@torch.no_grad()
+def test_pointer_net_never_samples_a_masked_candidate_or_a_taken_fire():
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(1)
+    N, K = 4, 6
+    net = PointerPlannerNet(N)
+    net.log_temperature.fill_(-3.0)  # sharp logits: the drones would all prefer the same fire without the mask
+    for _ in range(30):
+        obs = random_obs(64, N, K, g)
+        actions, logp, entropy, _ = net.forward_act(obs, generator=g)
+        n_valid = obs["fires_mask"].sum(-1, keepdim=True)
+        assert bool((actions < n_valid).all())
+        assert bool(torch.isfinite(logp).all()) and bool(torch.isfinite(entropy).all())
+        fires = torch.where(actions > 0, actions, -torch.arange(1, N + 1).expand_as(actions))  # 0 -> unique
+        assert bool((fires.sort(-1).values.diff(dim=-1) != 0).all()), "two drones share a fire"
+    # only the groundstation listed: every drone goes there
+    obs = random_obs(8, N, K, g, n_valid=torch.ones(8, dtype=torch.long))
+    assert bool((net.forward_act(obs, generator=g)[0] == 0).all())
+    # the decoder's per-drone distributions give masked and taken entries probability exactly 0
+    obs = random_obs(32, N, K, g)
+    d, fires, valid = net.encoder(obs)
+    actions = net.forward_act(obs, generator=g)[0]
+    probs = torch.softmax(net.decode_logits(net.base_logits(d, fires), valid, actions), -1)
+    assert bool((probs[~valid.unsqueeze(1).expand_as(probs)] == 0).all())
+    taken = probs[:, 1].gather(-1, actions[:, :1])  # drone 1 cannot take drone 0's fire
+    assert bool((taken[actions[:, 0] > 0] == 0).all())
+
+
+@torch.no_grad()
+def test_pointer_groundstation_may_repeat():
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(2)
+    net = PointerPlannerNet(3)
+    obs = random_obs(256, 3, 5, g, n_valid=torch.full((256,), 5))  # 4 fires for 3 drones: no forced fallback
+    d, fires, valid = net.encoder(obs)
+    base = net.base_logits(d, fires)
+    home = torch.zeros(256, 3, dtype=torch.long)  # every drone at the groundstation
+    logits = net.decode_logits(base, valid, home)
+    # drone i's groundstation logit carries the soft penalty c * (number of earlier drones there), no mask
+    torch.testing.assert_close(logits[..., 0], base[..., 0] - net.penalty() * torch.arange(3.0))
+    torch.testing.assert_close(logits[..., 1:], base[..., 1:])
+    net.log_penalty.fill_(-3.0)  # c = 0.05: repeats become common enough to observe in samples
+    actions = net.forward_act(obs, generator=g)[0]
+    assert bool(((actions == 0).sum(-1) >= 2).any())
+
+
+@pytest.mark.parametrize("net_cls", NETS)
+def test_evaluate_reproduces_the_sampled_log_probs(net_cls):
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(3)
+    N, K = 3, 8
+    net = net_cls(N)
+    obs = random_obs(40, N, K, g)
+    actions, logp, entropy, value = net.forward_act(obs, generator=g)
+    e_logp, e_entropy, e_value = net.evaluate(obs, actions)
+    assert torch.equal(logp, e_logp) and torch.equal(entropy, e_entropy) and torch.equal(value, e_value)
+    # trimming and extra padding only change which masked entries exist: same outputs up to float rounding
+    for variant in (trim_candidates(obs), pad(obs, 25)):
+        v_logp, v_entropy, v_value = net.evaluate(variant, actions)
+        torch.testing.assert_close(v_logp, logp)
+        torch.testing.assert_close(v_entropy, entropy)
+        torch.testing.assert_close(v_value, value)
+    # deterministic actions are reproduced as well
+    actions, logp = net.forward_act(obs, deterministic=True)[:2]
+    assert torch.equal(net.evaluate(obs, actions)[0], logp)
+    assert torch.equal(net.forward_act(pad(obs, 25), deterministic=True)[0], actions)
+
+
+@torch.no_grad()
+def test_thesis_joint_log_prob_is_the_sum_of_per_drone_categoricals():
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(4)
+    net = ThesisPlannerNet(2)
+    obs = random_obs(16, 2, 5, g, n_valid=torch.full((16,), 5))
+    actions, logp, entropy, _ = net.forward_act(obs, generator=g)
+    dist = torch.distributions.Categorical(probs=net.probs(obs))  # attention weights, averaged over heads
+    torch.testing.assert_close(logp, dist.log_prob(actions).sum(-1))
+    torch.testing.assert_close(entropy, dist.entropy().sum(-1))
+
+
+# ---------------------------------------------------------------------------------------------- PPO
+
+
+def bandit_rollout(agent: PlannerPPO, obs: dict, T: int, g: torch.Generator) -> PlannerRollout:
+    """One-step episodes: reward 1 when drone 0 picks candidate 2 and drone 1 picks candidate 3."""
+    E = obs["drones"].shape[0]
+    actions, logps, values = [], [], []
+    for _ in range(T):
+        a, lp, v = agent.act(obs, generator=g)
+        actions.append(a)
+        logps.append(lp)
+        values.append(v)
+    actions = torch.stack(actions)
+    rewards = ((actions[..., 0] == 2) & (actions[..., 1] == 3)).float()
+    done = torch.ones(T, E, dtype=torch.bool)
+    stacked = {k: v.unsqueeze(0).expand(T, *v.shape) for k, v in obs.items()}
+    return PlannerRollout(stacked, actions, torch.stack(logps), torch.stack(values), torch.zeros(T, E), rewards,
+                          done, torch.zeros_like(done))
+
+
+@pytest.mark.parametrize("network", ["thesis", "pointer"])
+def test_planner_ppo_learns_a_joint_bandit(network):
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(5)
+    cfg = PlannerPPOConfig(lr=3e-3, horizon=8 * 16, batch_size=64, k_epochs=4, entropy_coeff=0.0,
+                           value_loss_coef=0.5, network=network)
+    agent = PlannerPPO(cfg, num_drones=2)
+    one = random_obs(1, 2, 4, g, n_valid=torch.tensor([4]))  # one fixed scene, seen by 16 envs
+    obs = {k: v.expand(16, *v.shape[1:]) for k, v in one.items()}
+    first = float(bandit_rollout(agent, obs, 8, g).rewards.mean())
+    for _ in range(20):
+        metrics = agent.update(bandit_rollout(agent, obs, 8, g), g)
+    assert all(v == v for k, v in metrics.items() if k != "explained_variance"), metrics  # no NaN
+    actions = agent.act(obs, deterministic=True)[0]
+    assert first < 0.3
+    assert bool((actions == torch.tensor([2, 3])).all()), actions
+    assert agent.updates == 20 and agent.gradient_steps == 20 * 4 * 2
+
+
+@pytest.mark.parametrize("network", ["thesis", "pointer"])
+def test_state_dict_round_trip_gives_identical_outputs(network):
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(6)
+    cfg = PlannerPPOConfig(horizon=32, batch_size=16, network=network)
+    a = PlannerPPO(cfg, num_drones=3)
+    a.update(bandit_rollout(a, random_obs(8, 3, 6, g), 4, g), g)
+    b = PlannerPPO(cfg, num_drones=3)
+    b.load_state_dict(a.state_dict())
+    obs = random_obs(16, 3, 6, g)
+    actions, logp, value = a.act(obs, generator=torch.Generator().manual_seed(7))
+    b_actions, b_logp, b_value = b.act(obs, generator=torch.Generator().manual_seed(7))
+    assert torch.equal(actions, b_actions) and torch.equal(logp, b_logp) and torch.equal(value, b_value)
+    assert b.updates == 1 and b.gradient_steps == a.gradient_steps and b.scaler.count == a.scaler.count
+    assert b.optimizer.state_dict()["state"].keys() == a.optimizer.state_dict()["state"].keys()

@@ -1,0 +1,49 @@
+"""The planner level end to end: `roshan train` on a planner config, resume, and `roshan eval --baseline greedy`
+with the thesis-style comparison and the {"policy", "greedy"} JSON."""
+
+import json
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from roshan.cli import main
+from roshan.run import checkpoint_path, load_checkpoint
+
+ROOT = Path(__file__).resolve().parents[2]
+MODEL = ROOT / "models" / "fly_simple"
+# The small bundled field keeps episodes short (T_max 1784 low-level steps at 5 %).
+TINY = ["--set", "map.name=21x21_Field", "--set", "ignition.fire_percentage=0.05",
+        "--set", f"planner.fly_model={MODEL}", "--set", f"planner.explorer_model={MODEL}",
+        "--set", "planner.num_explorers=2", "--set", "train.num_envs=4", "--set", "planner_ppo.horizon=32",
+        "--set", "planner_ppo.batch_size=16", "--set", "train.max_minutes=0", "--set", "train.eval_every=0"]
+
+
+def cli(*args):
+    return CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
+
+
+def test_planner_trains_resumes_and_evaluates_against_greedy_on_the_same_episodes(tmp_path):
+    res = cli("train", ROOT / "configs/planner.yaml", "--root", tmp_path, "--name", "p", "--no-eval", "--quiet",
+              *TINY, "--set", "train.max_updates=2")
+    assert res.exit_code == 0, res.output
+    run = tmp_path / "p"
+    progress = load_checkpoint(checkpoint_path(run, "latest"))["progress"]
+    assert (progress["updates"], progress["env_steps"]) == (2, 64)  # decisions: 8 per env and update
+    res = cli("train", ROOT / "configs/planner.yaml", "--resume", run, "--no-eval", "--quiet", *TINY,
+              "--set", "train.max_updates=3")
+    assert res.exit_code == 0, res.output
+    assert load_checkpoint(checkpoint_path(run, "latest"))["progress"]["updates"] == 3
+
+    out = tmp_path / "eval.json"
+    res = cli("eval", run, "--episodes", 4, "--envs", 4, "--seed", 5, "--baseline", "greedy", "--json", out,
+              "--quiet")
+    assert res.exit_code == 0, res.output
+    assert "greedy" in res.output and "TTE" in res.output
+    payload = json.loads(out.read_text())
+    assert set(payload) == {"policy", "greedy"}
+    for part in payload.values():
+        assert part["episodes"] == 4 and 0.0 <= part["success_rate"] <= 1.0
+        assert set(part["failure_rates"]) == {"collision", "boundary", "timeout", "burnout"}
+        assert part["failure_rates"]["collision"] == 0.0  # collisions never end planner episodes
+        assert part["tte"]["mean"] > 0 and part["tte"]["median"] > 0
+    assert (run / "eval" / "episodes.csv").is_file() and (run / "eval" / "greedy" / "episodes.csv").is_file()
