@@ -29,7 +29,7 @@ def test_planner_trains_resumes_and_evaluates_against_greedy_on_the_same_episode
     run = tmp_path / "p"
     progress = load_checkpoint(checkpoint_path(run, "latest"))["progress"]
     assert (progress["updates"], progress["env_steps"]) == (2, 64)  # decisions: 8 per env and update
-    res = cli("train", ROOT / "configs/planner.yaml", "--resume", run, "--no-eval", "--quiet", *TINY,
+    res = cli("train", "--resume", run, "--no-eval", "--quiet", *TINY,
               "--set", "train.max_updates=3")
     assert res.exit_code == 0, res.output
     assert load_checkpoint(checkpoint_path(run, "latest"))["progress"]["updates"] == 3
