@@ -216,8 +216,6 @@ def _number(spec: dict, name: str, at: str) -> float:
 def _check_key(key: str, where: str) -> None:
     if key in all_keys(RunConfig):
         return
-    if str(key).startswith("planner."):
-        raise StudyError(f"{where}: unknown key {key!r} (the planner level is not built yet)")
     raise StudyError(f"{where}: unknown key {key!r}{_suggest(str(key), all_keys(RunConfig))}")
 
 

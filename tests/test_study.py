@@ -79,9 +79,10 @@ def test_shipped_search_spaces():
     sampled = fly.sample(optuna.create_study().ask())
     assert sampled["fly.rewards.collision"] == sampled["fly.rewards.boundary"]
     assert len(st.load_space(REPO / "configs" / "spaces" / "ppo.yaml", base).params) == 10
-    planner_error = r"unknown key 'planner.rewards.goal' \(the planner level is not built yet\)"
-    with pytest.raises(st.StudyError, match=planner_error):
-        st.load_space(REPO / "configs" / "spaces" / "planner_rewards.yaml", base)
+    planner = st.load_space(REPO / "configs" / "spaces" / "planner_rewards.yaml",
+                            load_run_config(REPO / "configs" / "planner.yaml"))
+    assert {p.key for p in planner.params} == {f"planner.rewards.{k}" for k in
+                                               ("goal", "burned", "ground", "timeout", "same", "extinguish", "fast")}
 
 
 def test_yaml_numbers_without_a_dot_are_read_as_numbers(tmp_path):
@@ -96,9 +97,9 @@ def test_cli_rejects_bad_space_and_unreachable_storage_before_creating_anything(
     bad.write_text("params:\n  fly.rewards.goal: {type: float, low: 5.0, high: 0.2}\n")
     r = CliRunner().invoke(main, ["study", str(CONFIG), "--space", str(bad), "--trials", "1", "--root", str(tmp_path)])
     assert r.exit_code != 0 and "fly.rewards.goal: empty range [5.0, 0.2]" in r.output
-    r = CliRunner().invoke(main, ["study", str(CONFIG), "--space", str(REPO / "configs/spaces/planner_rewards.yaml"),
-                                  "--trials", "1", "--root", str(tmp_path)])
-    assert r.exit_code != 0 and "(the planner level is not built yet)" in r.output
+    bad.write_text("params:\n  planner.rewards.gaol: {type: float, low: 0.1, high: 5.0}\n")
+    r = CliRunner().invoke(main, ["study", str(CONFIG), "--space", str(bad), "--trials", "1", "--root", str(tmp_path)])
+    assert r.exit_code != 0 and "unknown key 'planner.rewards.gaol'" in r.output
     url = "postgresql://roshan:s3cret@127.0.0.1:1/roshan"  # nothing listens on port 1
     r = CliRunner().invoke(main, ["study", str(CONFIG), "--space", str(REPO / "configs/spaces/fly_rewards.yaml"),
                                   "--trials", "1", "--storage", url, "--root", str(tmp_path)])
