@@ -7,6 +7,7 @@ The env seed makes an evaluation repeatable: the same seed gives the same fire l
 
 import json
 import math
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -163,8 +164,10 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
     cfg = apply_overrides(cfg, overrides) if overrides else cfg
     E = max(1, min(num_envs or cfg.train.eval_envs, episodes))
     env = make_env(cfg, E, seed, evaluation=True)
-    if gif_path is not None and frames_dir is None:
-        frames_dir = Path(gif_path).with_suffix("") / "frames"
+    scratch = None
+    if gif_path is not None and frames_dir is None:  # frames only for the GIF: a scratch folder, removed after
+        scratch = tempfile.TemporaryDirectory(prefix="roshan_frames_")
+        frames_dir = Path(scratch.name)
     eps = run_episodes(env, policy_fn(agent), episodes, seed, frames_dir, progress_bar)
     base_eps = None
     if baseline is not None and getattr(env, "is_planner", False):
@@ -201,6 +204,8 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         from roshan.kernels.render import write_gif
 
         write_gif(sorted(Path(frames_dir).glob("frame_*.png")), Path(gif_path))
+    if scratch is not None:
+        scratch.cleanup()
     summary["checkpoint"], summary["out_dir"] = str(path), str(out)
     return summary
 

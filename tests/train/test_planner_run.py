@@ -35,8 +35,9 @@ def test_planner_trains_resumes_and_evaluates_against_greedy_on_the_same_episode
     assert load_checkpoint(checkpoint_path(run, "latest"))["progress"]["updates"] == 3
 
     out = tmp_path / "eval.json"
+    gif = tmp_path / "gif" / "episode.gif"
     res = cli("eval", run, "--episodes", 4, "--envs", 4, "--seed", 5, "--baseline", "greedy", "--json", out,
-              "--quiet")
+              "--gif", gif, "--quiet")
     assert res.exit_code == 0, res.output
     assert "greedy" in res.output and "TTE" in res.output
     payload = json.loads(out.read_text())
@@ -47,3 +48,5 @@ def test_planner_trains_resumes_and_evaluates_against_greedy_on_the_same_episode
         assert part["failure_rates"]["collision"] == 0.0  # collisions never end planner episodes
         assert part["tte"]["mean"] > 0 and part["tte"]["median"] > 0
     assert (run / "eval" / "episodes.csv").is_file() and (run / "eval" / "greedy" / "episodes.csv").is_file()
+    assert gif.read_bytes()[:6] == b"GIF89a"
+    assert [p.name for p in gif.parent.iterdir()] == ["episode.gif"]  # the GIF's frames were scratch files
