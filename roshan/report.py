@@ -6,6 +6,7 @@ import contextlib
 import csv
 import io
 import json
+import logging
 import math
 import os
 import tempfile
@@ -709,7 +710,15 @@ def read_tensorboard_scalars(tb_dir: str | os.PathLike) -> dict[str, list[tuple[
         raise FileNotFoundError(f"read_tensorboard_scalars: no such folder {tb_dir}")
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    # size_guidance 0 keeps every event; the default keeps a 10,000-point reservoir sample per tag.
+    # size_guidance 0 keeps every event; the default keeps a 10,000-point reservoir sample per tag. A resumed
+    # run's newer file restarts at its checkpoint's step; the accumulator then drops the older file's points
+    # after it (work the resume discarded) and warns about it, which is expected here, hence the quiet logger.
     acc = EventAccumulator(str(tb_dir), size_guidance={"scalars": 0})
-    acc.Reload()
+    tb_logger = logging.getLogger("tensorboard")
+    level = tb_logger.level
+    tb_logger.setLevel(logging.ERROR)
+    try:
+        acc.Reload()
+    finally:
+        tb_logger.setLevel(level)
     return {tag: [(int(e.step), float(e.value)) for e in acc.Scalars(tag)] for tag in sorted(acc.Tags()["scalars"])}
