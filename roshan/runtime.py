@@ -57,6 +57,38 @@ def ensure_taichi() -> str:
     return current_arch() or init_taichi()
 
 
+# Taichi's LLVM backends (CPU, CUDA) hold at most 512 field trees per process and write past that limit
+# without a check (a segfault in a later kernel). Fields declared before a kernel launch become one tree when
+# it launches; one FlyVectorEnv makes about 5 and a planner env about 15, and they stay until ti.reset().
+MAX_FIELD_TREES = 512
+TREE_HEADROOM = 32
+
+
+def field_trees() -> int:
+    """Field trees Taichi has allocated in this process (0 before initialisation)."""
+    if current_arch() is None:
+        return 0
+    return int(ti.lang.impl.get_runtime().prog.get_snode_tree_size())
+
+
+def check_field_room(what: str) -> None:
+    """Raise a clear error instead of Taichi's out-of-bounds write when the tree limit is close."""
+    used = field_trees()
+    if used + TREE_HEADROOM > MAX_FIELD_TREES:
+        raise RuntimeError(
+            f"{what}: this process already holds {used} Taichi field trees (the CPU/CUDA backends allow "
+            f"{MAX_FIELD_TREES}, and envs keep theirs until Taichi is reset); build fewer simulators per process, "
+            "reuse envs with reset(), or call roshan.runtime.reset_taichi() once the old ones are no longer used")
+
+
+def reset_taichi() -> None:
+    """Free every field and compiled kernel (``ti.reset``); the next simulator initialises Taichi again.
+    Objects built before (envs, simulators) must not be used afterwards."""
+    if current_arch() is not None:
+        ti.reset()
+    _current.clear()
+
+
 def torch_device() -> str:
     """The torch device whose memory Taichi kernels share: ``cuda`` on CUDA, else ``cpu``."""
     return "cuda" if current_arch() == "cuda" else "cpu"

@@ -3,12 +3,16 @@
 import numpy as np
 import pytest
 
-from roshan.runtime import init_taichi
+from roshan.runtime import init_taichi, reset_taichi
 
 
-@pytest.fixture(scope="session", autouse=True)
+@pytest.fixture(scope="module", autouse=True)
 def taichi_cpu():
+    """Taichi on the CPU, reset after each test module: the suite builds hundreds of envs, and one process
+    holds at most 512 field trees (roshan.runtime.MAX_FIELD_TREES)."""
     init_taichi("cpu")
+    yield
+    reset_taichi()
 
 
 def make_map(classes, name="test"):

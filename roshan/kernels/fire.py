@@ -23,7 +23,7 @@ from roshan.kernels import particles as pt
 from roshan.kernels import rng
 from roshan.kernels.ignition import PATTERNS, light_initial_fires
 from roshan.maps import BURNED, BURNING, CLASSES, FLOODED, GENERIC_UNBURNED, LandCoverMap
-from roshan.runtime import ensure_taichi
+from roshan.runtime import check_field_room, ensure_taichi
 
 # Cell records: integers (state, flags, visit stamp, emission periods) and f64 timers (seconds).
 C_STATE, C_FLAGS, C_VISIT, C_PERIODS = range(4)
@@ -93,6 +93,7 @@ class FireSim:
     def __init__(self, land: LandCoverMap, fire: FireConfig | None = None, wind: WindConfig | None = None,
                  ignition: IgnitionConfig | None = None, num_envs: int = 1, seed: int = 0):
         ensure_taichi()
+        check_field_room("FireSim")
         self.land_map = land
         self.fire_cfg = fire = fire or FireConfig()
         self.wind_cfg = wind = wind or WindConfig()
