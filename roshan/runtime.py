@@ -59,7 +59,7 @@ def ensure_taichi() -> str:
 
 # Taichi's LLVM backends (CPU, CUDA) hold at most 512 field trees per process and write past that limit
 # without a check (a segfault in a later kernel). Fields declared before a kernel launch become one tree when
-# it launches; one FlyVectorEnv makes about 5 and a planner env about 15, and they stay until ti.reset().
+# it launches; one FlyVectorEnv makes 5 (a planner env more), and they stay until ti.reset().
 MAX_FIELD_TREES = 512
 TREE_HEADROOM = 32
 
