@@ -353,9 +353,9 @@ def env_speed(env_counts=(1, 64, 256, 1024, 4096), drones: int = 4, fire_percent
 
 
 def format_env_speed(report: dict) -> str:
-    lines = [f"{'ign':>6}{'E':>6}{'policy':>11}{'env-steps/s':>14}{'agent-steps/s':>15}{'x original':>12}"]
+    lines = [f"{'ign':>6}{'E':>6}{'policy':>15}{'env-steps/s':>14}{'agent-steps/s':>15}{'x original':>12}"]
     for r in report["runs"]:
-        lines.append(f"{r['fire_percentage'] * 100:>5.1f}%{r['envs']:>6}{r['policy']:>11}"
+        lines.append(f"{r['fire_percentage'] * 100:>5.1f}%{r['envs']:>6}{r['policy']:>15}"
                      f"{r['env_steps_per_s']:>14,.0f}{r['agent_steps_per_s']:>15,.0f}"
                      f"{r['env_steps_per_s'] / report['original_eval_env_steps_per_s']:>12.1f}")
     return "\n".join(lines)
