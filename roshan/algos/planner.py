@@ -18,7 +18,7 @@ from torch import nn
 from roshan.algos.networks import layer_init
 from roshan.algos.normalize import RewardScaler
 from roshan.algos.optim import OptimConfig, make_optimizer, make_scheduler
-from roshan.algos.ppo import approx_kl, clipped_surrogate, explained_variance
+from roshan.algos.ppo import clip_gradients, explained_variance, minibatch_loss, normalized_advantages
 from roshan.algos.returns import gae
 from roshan.config import choice, num
 
@@ -398,33 +398,16 @@ class PlannerPPO:
 
     def _minibatch_step(self, obs, actions, old_logp, adv, ret, stats) -> bool:
         """One gradient step; returns False (and takes no step) when the KL early stop triggers."""
-        cfg = self.cfg
-        adv = (adv - adv.mean()) / (adv.std(unbiased=False) + 1e-8) if adv.numel() > 1 else adv * 0.0
         new_logp, entropy, value = self.net.evaluate(obs, actions)
-        log_ratio = (new_logp - old_logp).clamp(-10.0, 10.0)
-        ratio = log_ratio.exp()
-        with torch.no_grad():
-            kl = float(approx_kl(old_logp, new_logp, cfg.kl_estimator))
-            clip_frac = float(((ratio - 1.0).abs() > cfg.eps_clip).float().mean())
-        if cfg.kl_early_stop and kl >= cfg.kl_target:
-            stats["approx_kl"].append(kl)
+        loss = minibatch_loss(self.cfg, new_logp, old_logp, entropy, value, normalized_advantages(adv), ret, stats)
+        if loss is None:
             return False
-        actor_loss = clipped_surrogate(ratio, adv, cfg.eps_clip)
-        entropy = entropy.mean()
-        value_loss = (value - ret).pow(2).mean()
-        loss = actor_loss - cfg.entropy_coeff * entropy + cfg.value_loss_coef * value_loss
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
-        if cfg.max_grad_norm > 0:
-            for params in self.groups.values():
-                nn.utils.clip_grad_norm_(params, cfg.max_grad_norm)
+        clip_gradients(self.groups, self.cfg.max_grad_norm)
         self.optimizer.step()
         self.scheduler.step()
         self.gradient_steps += 1
-        for k, v in (("actor_loss", actor_loss), ("value_loss", value_loss), ("entropy", entropy)):
-            stats[k].append(float(v.detach()))
-        stats["approx_kl"].append(kl)
-        stats["clip_fraction"].append(clip_frac)
         return True
 
     def state_dict(self) -> dict:

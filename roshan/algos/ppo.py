@@ -82,6 +82,40 @@ def clipped_surrogate(ratio: torch.Tensor, advantages: torch.Tensor, eps: float)
     return -torch.min(ratio * advantages, ratio.clamp(1.0 - eps, 1.0 + eps) * advantages).mean()
 
 
+def normalized_advantages(adv: torch.Tensor) -> torch.Tensor:
+    """Per-minibatch advantage normalisation (zero for a single sample, whose std is undefined)."""
+    return (adv - adv.mean()) / (adv.std(unbiased=False) + 1e-8) if adv.numel() > 1 else adv * 0.0
+
+
+def minibatch_loss(cfg, new_logp: torch.Tensor, old_logp: torch.Tensor, entropy: torch.Tensor, value: torch.Tensor,
+                   adv: torch.Tensor, ret: torch.Tensor, stats: dict) -> torch.Tensor | None:
+    """The PPO loss of one minibatch (clipped surrogate, entropy bonus, value loss; learning.md 6), its terms
+    appended to ``stats``; None when the approx-KL early stop triggers (only the KL is logged then). ``cfg``
+    is a PPO or planner PPO config (eps_clip, KL settings, coefficients)."""
+    log_ratio = (new_logp - old_logp).clamp(-10.0, 10.0)
+    ratio = log_ratio.exp()
+    with torch.no_grad():
+        kl = float(approx_kl(old_logp, new_logp, cfg.kl_estimator))
+        clip_frac = float(((ratio - 1.0).abs() > cfg.eps_clip).float().mean())
+    stats["approx_kl"].append(kl)
+    if cfg.kl_early_stop and kl >= cfg.kl_target:
+        return None
+    actor_loss = clipped_surrogate(ratio, adv, cfg.eps_clip)
+    entropy = entropy.mean()
+    value_loss = (value - ret).pow(2).mean()
+    for k, v in (("actor_loss", actor_loss), ("value_loss", value_loss), ("entropy", entropy)):
+        stats[k].append(float(v.detach()))
+    stats["clip_fraction"].append(clip_frac)
+    return actor_loss - cfg.entropy_coeff * entropy + cfg.value_loss_coef * value_loss
+
+
+def clip_gradients(groups: dict, max_norm: float) -> None:
+    """Gradient-norm clipping per parameter group (actor, critic, encoders), as the reference does."""
+    if max_norm > 0:
+        for params in groups.values():
+            nn.utils.clip_grad_norm_(params, max_norm)
+
+
 def explained_variance(values: torch.Tensor, returns: torch.Tensor) -> float:
     """1 - Var(R - V) / Var(R); NaN when the returns are constant."""
     var = returns.var()
@@ -312,37 +346,20 @@ class PPO:
 
     def _minibatch_step(self, forward, actions, old_logp, adv, ret, stats) -> bool:
         """One gradient step; returns False (and takes no step) when the KL early stop triggers."""
-        cfg = self.cfg
-        adv = (adv - adv.mean()) / (adv.std(unbiased=False) + 1e-8) if adv.numel() > 1 else adv * 0.0
         mean, std, value = forward()
         dist = self.distribution(mean, std)
-        new_logp = dist.log_prob_raw(actions)
-        log_ratio = (new_logp - old_logp).clamp(-10.0, 10.0)
-        ratio = log_ratio.exp()
-        with torch.no_grad():
-            kl = float(approx_kl(old_logp, new_logp, cfg.kl_estimator))
-            clip_frac = float(((ratio - 1.0).abs() > cfg.eps_clip).float().mean())
-        if cfg.kl_early_stop and kl >= cfg.kl_target:
-            stats["approx_kl"].append(kl)
+        loss = minibatch_loss(self.cfg, dist.log_prob_raw(actions), old_logp, dist.entropy(), value,
+                              normalized_advantages(adv), ret, stats)
+        if loss is None:
             return False
-        actor_loss = clipped_surrogate(ratio, adv, cfg.eps_clip)
-        entropy = dist.entropy().mean()
-        value_loss = (value - ret).pow(2).mean()
-        loss = actor_loss - cfg.entropy_coeff * entropy + cfg.value_loss_coef * value_loss
         for o in self.optimizers:
             o.zero_grad(set_to_none=True)
         loss.backward()
-        if cfg.max_grad_norm > 0:
-            for params in self.groups.values():
-                nn.utils.clip_grad_norm_(params, cfg.max_grad_norm)
+        clip_gradients(self.groups, self.cfg.max_grad_norm)
         for o, s in zip(self.optimizers, self.schedulers, strict=True):
             o.step()
             s.step()
         self.gradient_steps += 1
-        for k, v in (("actor_loss", actor_loss), ("value_loss", value_loss), ("entropy", entropy)):
-            stats[k].append(float(v.detach()))
-        stats["approx_kl"].append(kl)
-        stats["clip_fraction"].append(clip_frac)
         return True
 
     # ------------------------------------------------------------------------------------------ state
