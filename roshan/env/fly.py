@@ -24,6 +24,7 @@ from roshan.env.rewards import RewardCoefficients, RewardConfig, fly_reward, pro
 from roshan.kernels import observe, rng
 from roshan.kernels.drones import DroneSim
 from roshan.kernels.fire import N_BURNED, N_BURNING, N_CONV, N_EXTINGUISHED, N_RAD, FireSim
+from roshan.kernels.render import EnvZeroFrames
 from roshan.maps import load_map
 from roshan.runtime import ensure_taichi, torch_device
 
@@ -339,7 +340,7 @@ class FlyVectorEnv(gym.vector.VectorEnv):
         # "episode_stats", not "episode": gymnasium's RecordEpisodeStatistics writes info["episode"] itself.
         self._info = {"final_obs": self._views(self._final_buf),
                       "episode_stats": {k: self._episode[:, i] for i, k in enumerate(EPISODE_FIELDS)}}
-        self._renderer = None
+        self._viewer = EnvZeroFrames(self.drones)
         self._has_reset = False
 
     def _define_spaces(self, num_envs: int, n: int, frames: int) -> None:
@@ -407,17 +408,10 @@ class FlyVectorEnv(gym.vector.VectorEnv):
 
     def render(self):
         """An RGB frame (H, W, 3) uint8 of env 0: land cover, fire, particles, drones, goals, groundstation."""
-        from roshan.kernels.render import FrameRenderer, drone_overlay
-
-        if self._renderer is None:
-            self._renderer = FrameRenderer(self.fire, backend="raster")
-            self._overlay = drone_overlay(self.drones)
-        return self._renderer.render(overlay=self._overlay)
+        return self._viewer.render()
 
     def close(self, **kwargs):
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._viewer.close()
 
     @property
     def drone_config(self) -> DroneConfig:

@@ -24,6 +24,7 @@ from roshan.kernels.drones import DroneSim
 from roshan.kernels.explore import ExploreMaps
 from roshan.kernels.fire import FireSim
 from roshan.kernels.planner import PlannerKernels, obs_layout
+from roshan.kernels.render import EnvZeroFrames
 from roshan.maps import load_map
 from roshan.runtime import ensure_taichi, torch_device
 
@@ -173,7 +174,7 @@ class PlannerVectorEnv(gym.vector.VectorEnv):
         self.terminations, self.truncations = done_bool[:, 0], done_bool[:, 1]
         self._info = {"final_obs": self._views(self._final_buf),
                       "episode_stats": {k: self._episode[:, i] for i, k in enumerate(EPISODE_FIELDS)}}
-        self._renderer = None
+        self._viewer = EnvZeroFrames(self.drones)
         self._has_reset = False
 
     def _define_spaces(self, num_envs: int, n: int) -> None:
@@ -267,14 +268,7 @@ class PlannerVectorEnv(gym.vector.VectorEnv):
 
     def render(self):
         """An RGB frame (H, W, 3) uint8 of env 0: land cover, fire, drones with their goals, explorers."""
-        from roshan.kernels.render import FrameRenderer, drone_overlay
-
-        if self._renderer is None:
-            self._renderer = FrameRenderer(self.fire, backend="raster")
-            self._overlay = drone_overlay(self.drones)
-        return self._renderer.render(overlay=self._overlay)
+        return self._viewer.render()
 
     def close(self, **kwargs):
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        self._viewer.close()

@@ -435,6 +435,27 @@ def drone_overlay(drones, env: int = 0) -> DroneOverlay:
     return DroneOverlay(drones, env)
 
 
+class EnvZeroFrames:
+    """``render()`` of the vector envs: env 0's land cover, fire and drones through the raster backend, built on
+    the first call (rendering is optional, and the renderer compiles kernels)."""
+
+    def __init__(self, drones):
+        self.drones = drones
+        self._renderer: FrameRenderer | None = None
+        self._overlay: DroneOverlay | None = None
+
+    def render(self) -> np.ndarray:
+        if self._renderer is None:
+            self._renderer = FrameRenderer(self.drones.fire, backend="raster")
+            self._overlay = drone_overlay(self.drones)
+        return self._renderer.render(overlay=self._overlay)
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
 def _arrow_geometry(height: int, width: int) -> tuple[float, float, float] | None:
     """(centre row, centre column, radius) of the wind arrow's disc in the top-right corner; None if too small."""
     radius = min(28.0, max(6.0, 0.05 * min(height, width)))
