@@ -32,6 +32,7 @@ T_IGN, T_BURN_LEFT, T_BURN_TIME, T_EXPOSURE, T_FLOOD = range(5)
 TIMER_FIELDS = 5
 FLAG_EXPOSED = 1  # the cell is in the exposed ("ticking") list
 FLAG_BURNED_DOWN = 2  # burned out completely once (a flood returns it to BURNED)
+FLAG_DRAWN = 4  # this episode's durations, periods and exposure/burn timers are set (see _draw_durations)
 NEVER = -1.0  # tau_ign of cells that cannot ignite (the reference skips their exposure)
 
 # Per-env counters (E, N_COUNTS): list lengths, statistics and the update count since the last reset.
@@ -192,7 +193,8 @@ class FireSim:
     def reset(self, mask=None) -> None:
         """Start a new episode in the envs where ``mask`` (shape (E,), int32, numpy or torch) is non-zero.
 
-        Redraws every cell's durations, clears particles and lists, draws the wind and lights the initial fires.
+        Clears every cell (its durations are redrawn when first needed), particles and lists, draws the wind
+        and lights the initial fires.
         """
         mask = self._all if mask is None else self._int32(mask, (self.num_envs,), "reset mask")
         self._reset_envs(mask, self.seed_key)
@@ -227,7 +229,12 @@ class FireSim:
         return self.cells.to_numpy()[env, :, C_STATE].reshape(self.rows, self.cols)
 
     def cell_records(self) -> tuple[np.ndarray, np.ndarray]:
-        """Every cell record: ints (E, rows, cols, CELL_FIELDS) and f64 timers (E, rows, cols, TIMER_FIELDS)."""
+        """Every cell record: ints (E, rows, cols, CELL_FIELDS) and f64 timers (E, rows, cols, TIMER_FIELDS).
+
+        Draws the durations of the cells the episode has not needed yet first (same values as drawing them
+        later). The flood timer is meaningful only while a cell is flooded.
+        """
+        self._draw_all()
         shape = (self.num_envs, self.rows, self.cols)
         return (self.cells.to_numpy().reshape(*shape, CELL_FIELDS),
                 self.timers.to_numpy().reshape(*shape, TIMER_FIELDS))
@@ -337,21 +344,46 @@ class FireSim:
 
     @ti.func
     def _reset_cell(self, e, c):
-        """Per-cell randomisation of firespin.md 2.3: durations x (1 + s*u), s in {-1,0,1}, u ~ U(0.1, 0.2)."""
-        cls = self.land[c]
-        k = rng.key(self.env_key[e], rng.DOMAIN_CELLS, c)
-        s1 = ti.cast(rng.uniform_int(rng.key(k, 0, 0), 3) - 1, ti.f64)
-        u1 = 0.1 + 0.1 * ti.cast(rng.uniform(rng.key(k, 1, 0)), ti.f64)
-        s2 = ti.cast(rng.uniform_int(rng.key(k, 2, 0), 3) - 1, ti.f64)
-        u2 = 0.1 + 0.1 * ti.cast(rng.uniform(rng.key(k, 3, 0)), ti.f64)
-        tau_burn = ti.cast(self.cls_tau_burn[cls], ti.f64) * (1.0 + s1 * u1)
-        tau_ign = ti.f64(NEVER)
-        if self.cls_ignitable[cls] != 0:
-            tau_ign = ti.cast(self.cls_tau_ign[cls], ti.f64) * (1.0 + s2 * u2)
-        periods = _period(tau_burn, self.cls_n_conv[cls]) | (_period(tau_burn, self.cls_n_rad[cls]) << 16)
-        self.cells[e, c] = ti.Vector([cls, 0, -1, periods], ti.i32)
-        self.timers[e, c] = ti.Vector([tau_ign, tau_burn, 0.0, 0.0, 0.0], ti.f64)
+        """A new episode's cell: its class, no flags. Its durations are drawn when first needed.
+
+        Most cells of an episode are never exposed nor lit, and a reset that drew all of them spent most of a
+        random-action env step (ten hashes and two f64 divisions per cell). The draws are counter-based
+        (keyed by episode and cell), so drawing later gives exactly the same values.
+        """
+        self.cells[e, c] = ti.Vector([self.land[c], 0, -1, 0], ti.i32)
         self.mark[e, c] = 0
+
+    @ti.func
+    def _draw_durations(self, e, c):
+        """Per-cell randomisation of firespin.md 2.3: durations x (1 + s*u), s in {-1,0,1}, u ~ U(0.1, 0.2).
+
+        Once per episode, before the cell is first exposed or lit; also clears its exposure and burn timers.
+        The flood timer is set by every flood and read only while the cell is flooded.
+        """
+        flags = self.cells[e, c][C_FLAGS]
+        if (flags & FLAG_DRAWN) == 0:
+            cls = self.land[c]
+            k = rng.key(self.env_key[e], rng.DOMAIN_CELLS, c)
+            s1 = ti.cast(rng.uniform_int(rng.key(k, 0, 0), 3) - 1, ti.f64)
+            u1 = 0.1 + 0.1 * ti.cast(rng.uniform(rng.key(k, 1, 0)), ti.f64)
+            s2 = ti.cast(rng.uniform_int(rng.key(k, 2, 0), 3) - 1, ti.f64)
+            u2 = 0.1 + 0.1 * ti.cast(rng.uniform(rng.key(k, 3, 0)), ti.f64)
+            tau_burn = ti.cast(self.cls_tau_burn[cls], ti.f64) * (1.0 + s1 * u1)
+            tau_ign = ti.f64(NEVER)
+            if self.cls_ignitable[cls] != 0:
+                tau_ign = ti.cast(self.cls_tau_ign[cls], ti.f64) * (1.0 + s2 * u2)
+            self.cells[e, c][C_PERIODS] = (_period(tau_burn, self.cls_n_conv[cls])
+                                           | (_period(tau_burn, self.cls_n_rad[cls]) << 16))
+            self.cells[e, c][C_FLAGS] = flags | FLAG_DRAWN
+            self.timers[e, c][T_IGN] = tau_ign
+            self.timers[e, c][T_BURN_LEFT] = tau_burn
+            self.timers[e, c][T_BURN_TIME] = 0.0
+            self.timers[e, c][T_EXPOSURE] = 0.0
+
+    @ti.kernel
+    def _draw_all(self):
+        for e, c in ti.ndrange(self.num_envs, self.num_cells):
+            self._draw_durations(e, c)
 
     @ti.kernel
     def _advance(self, n_steps: ti.i32):
@@ -389,7 +421,8 @@ class FireSim:
         self.cells[e, c][C_VISIT] = t
         flags = self.cells[e, c][C_FLAGS]
         if self.cls_ignitable[self.cells[e, c][C_STATE]] != 0 and (flags & FLAG_EXPOSED) == 0:
-            self.cells[e, c][C_FLAGS] = flags | FLAG_EXPOSED
+            self._draw_durations(e, c)
+            self.cells[e, c][C_FLAGS] |= FLAG_EXPOSED
             n = self.counts[e, N_EXPOSED]
             self.exposed[e, n] = c
             self.counts[e, N_EXPOSED] = n + 1
@@ -467,6 +500,7 @@ class FireSim:
 
     @ti.func
     def _ignite(self, e, c):
+        self._draw_durations(e, c)
         self.cells[e, c][C_STATE] = BURNING
         n = self.counts[e, N_BURNING]
         self.burning[e, n] = c

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from roshan.config import ConvectionConfig, FireConfig, IgnitionConfig, RadiationConfig, WindConfig
-from roshan.kernels.fire import T_BURN_LEFT, FireSim
+from roshan.kernels.fire import C_PERIODS, C_STATE, T_BURN_LEFT, T_IGN, FireSim
 from roshan.maps import BURNED, BURNING, FLOODED, load_map
 from tests.conftest import make_map
 
@@ -194,3 +194,26 @@ def test_uniform_map_takes_its_times_from_the_config():
     _, timers = sim.cell_records()
     assert np.all((timers[..., 1] >= 40.0 - 1e-6) & (timers[..., 1] <= 60.0 + 1e-6))
     assert np.all((timers[..., 0] >= 16.0 - 1e-6) & (timers[..., 0] <= 24.0 + 1e-6))
+
+
+def test_cell_durations_are_the_same_whenever_they_are_drawn():
+    # Durations are drawn when a cell is first exposed or lit, not at reset: the counter-based draw must give
+    # the values an eager draw at reset gives, and a new episode must draw new ones.
+    woods = load_map("35x36_Woods")
+    eager = FireSim(woods, ignition=IgnitionConfig(fire_percentage=0.1), num_envs=4, seed=5)
+    lazy = FireSim(woods, ignition=IgnitionConfig(fire_percentage=0.1), num_envs=4, seed=5)
+    eager.reset()
+    ints_eager, timers_eager = eager.cell_records()  # every cell drawn at t = 0
+    lazy.reset()
+    lazy.step(3000)
+    stats = lazy.stats()
+    spread = stats["burning"] + stats["burned"] - stats["initial_fires"]
+    assert spread.sum() > 5, "cells must have been exposed and lit during the run"
+    ints_lazy, timers_lazy = lazy.cell_records()
+    np.testing.assert_array_equal(timers_lazy[..., T_IGN], timers_eager[..., T_IGN])
+    np.testing.assert_array_equal(ints_lazy[..., C_PERIODS], ints_eager[..., C_PERIODS])
+    unlit = (ints_lazy[..., C_STATE] != BURNING) & (ints_lazy[..., C_STATE] != BURNED)
+    np.testing.assert_array_equal(timers_lazy[..., T_BURN_LEFT][unlit], timers_eager[..., T_BURN_LEFT][unlit])
+    lazy.reset()
+    _, timers_next = lazy.cell_records()
+    assert np.mean(timers_next[..., T_BURN_LEFT] != timers_eager[..., T_BURN_LEFT]) > 0.5, "a new episode redraws"
