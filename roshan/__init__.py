@@ -3,8 +3,11 @@
 Importing the package registers the Gymnasium id ``roshan/FlyAgent-v0``: ``gymnasium.make`` gives a
 :class:`roshan.env.single.FlyEnv` and ``gymnasium.make_vec(..., num_envs=E)`` a
 :class:`roshan.env.fly.FlyVectorEnv` (keyword arguments go to those constructors). Entry points are strings, so
-registering imports neither Taichi nor torch.
+registering imports neither Taichi nor torch. Importing it also makes glibc keep freed memory for reuse
+(:mod:`roshan.allocator`: large torch temporaries were page-faulted in again on every step).
 """
+
+from roshan import allocator
 
 __version__ = "0.1.0"
 
@@ -24,3 +27,4 @@ def _register_envs() -> None:
 
 
 _register_envs()
+allocator.retain_freed_memory()
