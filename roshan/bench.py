@@ -264,6 +264,7 @@ def plot_fidelity(results: dict, path: Path) -> Path:
 # ---------------------------------------------------------------------------------------------- FlyAgent env
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
+SHIPPED_COLLISION_MODEL = Path(__file__).resolve().parent.parent / "models" / "fly_collision"
 ORIGINAL_FLY_EVAL_STEPS_PER_S = 935  # collision FlyAgent evaluation incl. policy inference, 35x36 at 1.5 %
 
 
@@ -271,8 +272,10 @@ def time_env(envs: int, drones: int, fire_percentage: float, steps: int, policy:
              seed: int = 0) -> dict:
     """Env-steps/s of the FlyAgent vector env (complex policy, collisions on), random actions or a network.
 
-    ``policy``: None (random actions drawn in torch), "simple" or "collision" (the FlyAgent actor sampling
-    actions, inference only, with the frame cache the trainer uses), or "simple+ppo" / "collision+ppo" (the
+    ``policy``: None (random actions drawn in torch), "simple" or "collision" (an untrained FlyAgent actor
+    sampling actions, inference only, with the frame cache the trainer uses), "fly_collision" (the shipped
+    trained collision FlyAgent, deterministic actions: what the original's figure measures; its drones fly
+    apart, so fewer neighbour slots are encoded, and reset less often), or "simple+ppo" / "collision+ppo" (the
     whole training iteration of configs/fly_simple.yaml / fly_collision.yaml at this E: rollouts of 16 steps and
     the PPO update). The first steps (kernel compilation) are not timed.
     """
@@ -288,14 +291,22 @@ def time_env(envs: int, drones: int, fire_percentage: float, steps: int, policy:
     cfg = Config(ignition=IgnitionConfig(fire_percentage=fire_percentage), drones=DroneConfig(num_drones=drones))
     env = FlyVectorEnv(envs, cfg, FlyConfig(policy="complex", collision=collision), seed=seed)
     obs, _ = env.reset(seed=seed)
-    agent = None if policy is None else PPO(PPOConfig(use_tanh_dist=True), collision=policy == "collision")
+    deterministic = policy == "fly_collision"
+    if policy is None:
+        agent = None
+    elif deterministic:
+        from roshan.evaluate import load_agent
+
+        agent = load_agent(SHIPPED_COLLISION_MODEL)[1]
+    else:
+        agent = PPO(PPOConfig(use_tanh_dist=True), collision=policy == "collision")
     cache, restarted = FrameCache(), None
     gen = torch.Generator().manual_seed(seed)
 
     def act(o):
         if agent is None:
             return torch.rand((envs, drones, 2), generator=gen) * 2 - 1
-        return agent.act(flatten_drones(o), cache=cache, restarted=restarted)[0].view(envs, drones, 2)
+        return agent.act(flatten_drones(o), deterministic, cache=cache, restarted=restarted)[0].view(envs, drones, 2)
 
     for _ in range(3):
         obs, *_ = env.step(act(obs))
@@ -347,7 +358,7 @@ def env_speed(env_counts=(1, 64, 256, 1024, 4096), drones: int = 4, fire_percent
         for e in env_counts:
             steps = max(20, min(max_steps, min_env_steps // e))
             for pol in policies:
-                steps_pol = steps if pol in (None, "simple") else max(16, steps // 4)
+                steps_pol = steps if pol in (None, "simple") else max(16, steps // 4)  # the slow networks
                 runs.append(time_env(e, drones, pct, steps_pol, pol))
     return {"threads": os.cpu_count(), "runs": runs, "original_eval_env_steps_per_s": ORIGINAL_FLY_EVAL_STEPS_PER_S}
 

@@ -404,8 +404,9 @@ def bench_fire(env_counts, steps, warmup, big, json_path, arch, threads):
 @click.option("--drones", type=click.IntRange(min=1), default=4, show_default=True)
 @click.option("--fire", "fire_percentages", default="0.015,0.35", show_default=True, help="Ignition fractions.")
 @click.option("--policies", default="random,simple,collision,collision+ppo", show_default=True,
-              help="random (env only), simple / collision (+ FlyAgent network inference), simple+ppo / "
-                   "collision+ppo (+ the PPO update of configs/fly_*.yaml).")
+              help="random (env only), simple / collision (+ untrained FlyAgent network inference), fly_collision "
+                   "(+ the shipped trained collision FlyAgent, deterministic), simple+ppo / collision+ppo (+ the "
+                   "PPO update of configs/fly_*.yaml).")
 @click.option("--min-env-steps", type=click.IntRange(min=1), default=100_000, show_default=True,
               help="Timed env-steps per run (the collision network runs a quarter).")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None)
@@ -423,11 +424,11 @@ def bench_env(env_counts, drones, fire_percentages, policies, min_env_steps, jso
     except ValueError as exc:
         _fail(ValueError(f"--envs / --fire: expected comma-separated numbers ({exc})"))
     pols = [None if p == "random" else p for p in policies.split(",") if p.strip()]
-    known = (None, "simple", "collision", "simple+ppo", "collision+ppo")
+    known = (None, "simple", "collision", "fly_collision", "simple+ppo", "collision+ppo")
     unknown = [p for p in pols if p not in known]
     if unknown:
-        _fail(ValueError(f"--policies: unknown {unknown}; expected random, simple, collision, simple+ppo, "
-                         "collision+ppo"))
+        _fail(ValueError(f"--policies: unknown {unknown}; expected random, simple, collision, fly_collision, "
+                         "simple+ppo, collision+ppo"))
     report = b.env_speed(counts, drones, pcts, pols, min_env_steps=min_env_steps)
     click.echo(b.format_env_speed(report))
     if json_path:

@@ -90,9 +90,9 @@ def test_bench_fire_and_fidelity_run_on_tiny_budgets(tmp_path):
 
 def test_bench_env_runs_on_a_tiny_budget(tmp_path):
     out = tmp_path / "env.json"
-    r = invoke("bench", "env", "--envs", "2", "--drones", "2", "--fire", "0.05", "--policies", "random,simple",
-               "--min-env-steps", "40", "--json", out)
+    r = invoke("bench", "env", "--envs", "2", "--drones", "2", "--fire", "0.05", "--policies",
+               "random,simple,fly_collision", "--min-env-steps", "40", "--json", out)
     assert r.exit_code == 0, r.output
     runs = json.loads(out.read_text())["runs"]
-    assert [run["policy"] for run in runs] == ["random", "simple"]
+    assert [run["policy"] for run in runs] == ["random", "simple", "fly_collision"]
     assert all(run["env_steps_per_s"] > 0 and run["agent_steps_per_s"] == 2 * run["env_steps_per_s"] for run in runs)
