@@ -16,7 +16,8 @@ import torch
 from roshan import report
 from roshan.algos.networks import flatten_drones
 from roshan.config import apply_overrides
-from roshan.env.fly import EPISODE_FIELDS, REASONS, FlyVectorEnv
+from roshan.env.fly import FlyVectorEnv
+from roshan.kernels.episode import EPISODE_FIELDS, REASONS
 from roshan.run import config_of_checkpoint, load_checkpoint, resolve_checkpoint
 from roshan.runtime import ensure_taichi, torch_device
 

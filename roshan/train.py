@@ -19,7 +19,8 @@ import torch
 from roshan.algos.networks import flatten_drones
 from roshan.algos.ppo import PPO, FrameCache, Rollout
 from roshan.config import dump_config
-from roshan.env.fly import EPISODE_FIELDS, REASONS, FlyVectorEnv
+from roshan.env.fly import FlyVectorEnv
+from roshan.kernels.episode import EPISODE_FIELDS, REASONS
 from roshan.run import (
     RunConfig,
     check_same_model,

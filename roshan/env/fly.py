@@ -23,16 +23,11 @@ from roshan.config import Config, DroneConfig, choice, num
 from roshan.env.rewards import RewardCoefficients, RewardConfig, fly_reward, proximity_sum
 from roshan.kernels import observe, rng
 from roshan.kernels.drones import DroneSim
-from roshan.kernels.fire import N_BURNED, N_BURNING, N_CONV, N_EXTINGUISHED, N_RAD, FireSim
+from roshan.kernels.episode import BOUNDARY, COLLISION, EPISODE_FIELDS, TIMEOUT, write_record
+from roshan.kernels.fire import N_BURNING, N_CONV, N_RAD, FireSim
 from roshan.kernels.render import EnvZeroFrames
 from roshan.maps import load_map
 from roshan.runtime import ensure_taichi, torch_device
-
-REASONS = ("none", "timeout", "boundary", "burnout", "collision")
-TIMEOUT, BOUNDARY, COLLISION = 1, 2, 4
-# Columns of the per-env episode record, valid where the episode ended this step.
-EP_SUCCESS, EP_REASON, EP_STEPS, EP_BURNED, EP_EXTINGUISHED, EP_RETURN = range(6)
-EPISODE_FIELDS = ("success", "reason", "steps", "burned_fraction", "extinguished", "return")
 
 
 @dataclass(frozen=True)
@@ -193,7 +188,7 @@ class FlyKernels:
             # from a crash or a success); only a pure time-out truncates.
             dones[e, 0] = ti.cast(real_end, ti.u8)
             dones[e, 1] = ti.cast(1 - real_end, ti.u8)
-            self.record_episode(episode, e, 1 - any_failed, last_reason)
+            write_record(episode, self.fire, e, 1 - any_failed, last_reason, self.steps[e], self.ret[e])
             self.ended[e] = 1
 
     @ti.func
@@ -270,15 +265,6 @@ class FlyKernels:
         out_of_time = ti.cast(terminal != 0 and timed_out != 0, ti.i32)
         return fly_reward(self.coef, reached, left_map, out_of_time, dr.extinguished[e, d], dr.collided[e, d],
                           progress, prox)
-
-    @ti.func
-    def record_episode(self, episode: ti.template(), e, success, reason):
-        episode[e, EP_SUCCESS] = ti.cast(success, ti.f32)
-        episode[e, EP_REASON] = ti.cast(reason, ti.f32)
-        episode[e, EP_STEPS] = ti.cast(self.steps[e], ti.f32)
-        episode[e, EP_BURNED] = ti.cast(self.fire.counts[e, N_BURNED], ti.f32) / self.fire.num_cells
-        episode[e, EP_EXTINGUISHED] = ti.cast(self.fire.counts[e, N_EXTINGUISHED], ti.f32)
-        episode[e, EP_RETURN] = self.ret[e]
 
 
 def fly_obs_views(buf: torch.Tensor, num_drones: int) -> dict[str, torch.Tensor]:

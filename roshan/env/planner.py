@@ -17,10 +17,11 @@ import torch
 from gymnasium.vector import AutoresetMode
 
 from roshan.config import Config, choice, num
-from roshan.env.fly import EPISODE_FIELDS, fly_obs_views
+from roshan.env.fly import fly_obs_views
 from roshan.env.rewards import PlannerCoefficients, PlannerRewardConfig
 from roshan.kernels import observe
 from roshan.kernels.drones import DroneSim
+from roshan.kernels.episode import EPISODE_FIELDS
 from roshan.kernels.explore import ExploreMaps
 from roshan.kernels.fire import FireSim
 from roshan.kernels.planner import PlannerKernels, obs_layout

@@ -20,7 +20,8 @@ import numpy as np
 
 from roshan.config import Config
 from roshan.config import replace as replace_validated
-from roshan.env.fly import REASONS, FlyConfig, FlyVectorEnv
+from roshan.env.fly import FlyConfig, FlyVectorEnv
+from roshan.kernels.episode import REASONS
 
 # Not "episode": gymnasium's RecordEpisodeStatistics (and SB3's Monitor) write info["episode_stats"] themselves and
 # refuse an env that already fills it.
@@ -116,7 +117,7 @@ class FlyEnv(gym.Env):
 
     The reward is the mean of the drones' rewards (a float); the per-drone rewards are in ``info["rewards"]``
     (numpy (N,)). A step that ends the episode returns the terminal observation, and its info holds
-    ``info["episode_record"]``: success (1.0/0.0), reason (a name from :data:`roshan.env.fly.REASONS`),
+    ``info["episode_record"]``: success (1.0/0.0), reason (a name from :data:`roshan.kernels.episode.REASONS`),
     steps (int), burned_fraction, extinguished and return (the mean-over-drones return). A timeout
     truncates; every other end terminates.
 

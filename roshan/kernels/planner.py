@@ -25,12 +25,10 @@ import taichi as ti
 from roshan.env.rewards import planner_outcome_reward, planner_step_reward
 from roshan.kernels import observe
 from roshan.kernels.drones import DroneSim
+from roshan.kernels.episode import BURNOUT, TIMEOUT, write_record
 from roshan.kernels.explore import ExploreMaps
-from roshan.kernels.fire import N_BURNED, N_BURNING, N_EXTINGUISHED, FireSim
+from roshan.kernels.fire import N_BURNED, N_BURNING, FireSim
 
-# Failure reasons, indices into roshan.env.fly.REASONS.
-TIMEOUT, BURNOUT = 1, 3
-EP_SUCCESS, EP_REASON, EP_STEPS, EP_BURNED, EP_EXTINGUISHED, EP_RETURN = range(6)
 GROUND_GOAL = -2  # goal_cell of a drone sent to the groundstation by the planner
 
 
@@ -191,12 +189,7 @@ class PlannerKernels:
     @ti.func
     def record_episode(self, episode: ti.template(), dones: ti.template(), e, success, reason):
         """Write env e's episode record; a pure timeout truncates, every other end terminates."""
-        episode[e, EP_SUCCESS] = ti.cast(success, ti.f32)
-        episode[e, EP_REASON] = ti.cast(reason, ti.f32)
-        episode[e, EP_STEPS] = ti.cast(self.steps[e], ti.f32)
-        episode[e, EP_BURNED] = ti.cast(self.fire.counts[e, N_BURNED], ti.f32) / self.fire.num_cells
-        episode[e, EP_EXTINGUISHED] = ti.cast(self.fire.counts[e, N_EXTINGUISHED], ti.f32)
-        episode[e, EP_RETURN] = self.ret[e]
+        write_record(episode, self.fire, e, success, reason, self.steps[e], self.ret[e])
         dones[e, 0] = ti.cast(reason != TIMEOUT, ti.u8)
         dones[e, 1] = ti.cast(reason == TIMEOUT, ti.u8)
         self.finished[e] = 1

@@ -14,9 +14,10 @@ from pettingzoo.test import parallel_api_test
 
 import roshan
 from roshan.config import Config, DroneConfig
-from roshan.env.fly import REASONS, FlyVectorEnv
+from roshan.env.fly import FlyVectorEnv
 from roshan.env.pettingzoo import FlyParallelEnv
 from roshan.env.single import EPISODE_KEY, FlyEnv
+from roshan.kernels.episode import REASONS
 
 ENV_ID = "roshan/FlyAgent-v0"
 N = 2

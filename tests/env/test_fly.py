@@ -5,7 +5,8 @@ import pytest
 import torch
 
 from roshan.config import Config, DroneConfig, IgnitionConfig, WindConfig
-from roshan.env.fly import REASONS, FlyConfig, FlyVectorEnv, time_limit
+from roshan.env.fly import FlyConfig, FlyVectorEnv, time_limit
+from roshan.kernels.episode import REASONS
 from roshan.maps import BURNING
 
 EMPTY = IgnitionConfig(fire_percentage=0.0)

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from roshan.config import Config, ConfigError, DroneConfig, IgnitionConfig, WindConfig, from_dict
-from roshan.env.fly import REASONS, FlyConfig, FlyVectorEnv, time_limit
+from roshan.env.fly import FlyConfig, FlyVectorEnv, time_limit
 from roshan.env.heuristics import straight_to_goal
+from roshan.kernels.episode import REASONS
 from roshan.maps import BURNING
 
 EMPTY = IgnitionConfig(fire_percentage=0.0)
