@@ -306,7 +306,9 @@ def time_env(envs: int, drones: int, fire_percentage: float, steps: int, policy:
     def act(o):
         if agent is None:
             return torch.rand((envs, drones, 2), generator=gen) * 2 - 1
-        return agent.act(flatten_drones(o), deterministic, cache=cache, restarted=restarted)[0].view(envs, drones, 2)
+        if deterministic:
+            return agent.act_mode(flatten_drones(o), cache=cache, restarted=restarted).view(envs, drones, 2)
+        return agent.act(flatten_drones(o), cache=cache, restarted=restarted)[0].view(envs, drones, 2)
 
     for _ in range(3):
         obs, *_ = env.step(act(obs))

@@ -44,7 +44,7 @@ def policy_fn(agent):
     if isinstance(agent, PlannerPPO):
         return lambda obs: agent.act(obs, deterministic=True)[0]
     if isinstance(agent, PPO):
-        return lambda obs: agent.act(obs, deterministic=True)[0]
+        return agent.act_mode
     return lambda obs: agent.act(obs)
 
 

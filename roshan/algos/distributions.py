@@ -38,7 +38,12 @@ class ClippedGaussian:
 
     @property
     def mode(self) -> torch.Tensor:
-        return self.base.mean.clamp(-1.0, 1.0)
+        return self.mode_of(self.base.mean)
+
+    @staticmethod
+    def mode_of(mean: torch.Tensor) -> torch.Tensor:
+        """The deterministic action of a mean, without building the distribution."""
+        return mean.clamp(-1.0, 1.0)
 
 
 class TanhNormal:
@@ -86,4 +91,9 @@ class TanhNormal:
 
     @property
     def mode(self) -> torch.Tensor:
-        return torch.tanh(self.base.mean)
+        return self.mode_of(self.base.mean)
+
+    @staticmethod
+    def mode_of(mu: torch.Tensor) -> torch.Tensor:
+        """The deterministic action of a pre-squash mean, without building the distribution."""
+        return torch.tanh(mu)

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from roshan.algos.normalize import RewardScaler
-from roshan.algos.ppo import PPO, PPOConfig, Rollout, approx_kl, clipped_surrogate, explained_variance
+from roshan.algos.ppo import PPO, FrameCache, PPOConfig, Rollout, approx_kl, clipped_surrogate, explained_variance
 
 
 def test_clipped_surrogate_by_hand():
@@ -167,3 +167,16 @@ def test_tanh_normal_raw_log_prob_matches_and_survives_saturation():
     a, b = far.log_prob_raw(torch.tensor([[10.0, 0.0]])), far.log_prob_raw(torch.tensor([[13.0, 0.0]]))
     assert torch.isfinite(a).all() and torch.isfinite(b).all() and float(a) != float(b)
     assert torch.tanh(torch.tensor(10.0)) == torch.tanh(torch.tensor(13.0))
+
+
+@pytest.mark.parametrize("tanh_dist", [False, True])
+def test_act_mode_is_the_deterministic_action(tanh_dist):
+    g = torch.Generator().manual_seed(1)
+    agent = PPO(PPOConfig(horizon=64, batch_size=32, use_tanh_dist=tanh_dist), collision=True)
+    with torch.no_grad():
+        agent.net.mu.weight.mul_(400.0)  # push some means towards the action bounds
+    obs = bandit_obs(16, torch.rand(16, 2, generator=g) * 4 - 2)
+    expected = agent.act(obs, deterministic=True)[0]
+    assert (expected.abs() > 0.9).any()
+    torch.testing.assert_close(agent.act_mode(obs), expected, rtol=0, atol=0)
+    torch.testing.assert_close(agent.act_mode(obs, cache=FrameCache()), expected, rtol=0, atol=0)
