@@ -291,24 +291,20 @@ def time_env(envs: int, drones: int, fire_percentage: float, steps: int, policy:
     cfg = Config(ignition=IgnitionConfig(fire_percentage=fire_percentage), drones=DroneConfig(num_drones=drones))
     env = FlyVectorEnv(envs, cfg, FlyConfig(policy="complex", collision=collision), seed=seed)
     obs, _ = env.reset(seed=seed)
-    deterministic = policy == "fly_collision"
-    if policy is None:
-        agent = None
-    elif deterministic:
-        from roshan.evaluate import load_agent
-
-        agent = load_agent(SHIPPED_COLLISION_MODEL)[1]
-    else:
-        agent = PPO(PPOConfig(use_tanh_dist=True), collision=policy == "collision")
     cache, restarted = FrameCache(), None
     gen = torch.Generator().manual_seed(seed)
+    if policy == "fly_collision":  # trained, deterministic: what evaluation runs
+        from roshan.evaluate import load_agent
+
+        network = load_agent(SHIPPED_COLLISION_MODEL)[1].act_mode
+    elif policy is not None:  # untrained, sampling: what a rollout runs
+        agent = PPO(PPOConfig(use_tanh_dist=True), collision=policy == "collision")
+        network = lambda o, **kw: agent.act(o, **kw)[0]  # noqa: E731
 
     def act(o):
-        if agent is None:
+        if policy is None:
             return torch.rand((envs, drones, 2), generator=gen) * 2 - 1
-        if deterministic:
-            return agent.act_mode(flatten_drones(o), cache=cache, restarted=restarted).view(envs, drones, 2)
-        return agent.act(flatten_drones(o), cache=cache, restarted=restarted)[0].view(envs, drones, 2)
+        return network(flatten_drones(o), cache=cache, restarted=restarted).view(envs, drones, 2)
 
     for _ in range(3):
         obs, *_ = env.step(act(obs))
