@@ -65,7 +65,7 @@ def simulate(config_path, map_name, envs, steps, seed, fire_percentage, clusters
     With --drones N every env is a FlyAgent episode whose drones extinguish fires; episodes that end restart
     at once, and the summary adds the episodes finished and their success rate.
     """
-    from roshan import simulate as sim_mod
+    from roshan.tools import simulate as sim_mod
 
     if policy is not None and drones is None:
         raise click.UsageError("--policy needs --drones N (without drones only the fire is simulated)")
@@ -159,8 +159,8 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
     and eval/ (episodes.csv, summary.json, plots). With train.auto_train = k, k runs with seeds seed..seed+k-1
     go to runs/<name>/seed_<s>/.
     """
-    from roshan import train as tr
-    from roshan.run import load_run_config
+    from roshan.config import load_run_config
+    from roshan.runs import train as tr
 
     flags = {"sim.arch": arch, "sim.threads": threads}
     overrides = [f"{k}={v}" for k, v in flags.items() if v is not None] + list(sets)
@@ -212,8 +212,8 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, frames_dir
     (median)); --set changes the evaluation setting (e.g. --set ignition.fire_percentage=0.05). For a planner
     run, --baseline greedy plays the heuristic controller on the same episodes (same seed and envs).
     """
-    from roshan import evaluate as ev
-    from roshan import report
+    from roshan.runs import evaluate as ev
+    from roshan.runs import report
     from roshan.runtime import init_taichi
 
     try:
@@ -293,7 +293,7 @@ def study_run(config_path, space_path, trials, storage, workers, name, root, res
               prune, prune_startup, prune_warmup, max_retry, heartbeat, quiet, worker, slot, sets, arch, threads):
     """Tune any config keys with Optuna (TPE, median pruning); the study survives crashes and spreads over
     machines through a shared --storage (README: Multi-machine Optuna study)."""
-    from roshan import study as st
+    from roshan.study.runner import runner as st
 
     try:
         if worker:
@@ -320,7 +320,7 @@ def study_run(config_path, space_path, trials, storage, workers, name, root, res
 def study_report(target, name, root, top_k, out_dir, no_plots):
     """Best trials of a study (a name under --root, a study folder, or a storage URL), the mean of the top-k
     trials' parameters as a ready config YAML, and Optuna's plots."""
-    from roshan import study as st
+    from roshan.study.runner import runner as st
 
     try:
         stu, default_out = st.open_for_report(target, root, name)
@@ -353,8 +353,8 @@ def bench():
 @THREADS
 def bench_fidelity(seeds, conditions, every, json_path, plot_path, arch, threads):
     """Fire statistics against the original's (shared/reference): our seed means vs its seed band."""
-    from roshan import bench as b
     from roshan.runtime import init_taichi
+    from roshan.tools import bench as b
 
     init_taichi(arch or "cpu", threads)
     conds = [c for c in b.FIDELITY_CONDITIONS if not conditions or c.name in conditions]
@@ -384,8 +384,8 @@ def bench_fidelity(seeds, conditions, every, json_path, plot_path, arch, threads
 @THREADS
 def bench_fire(env_counts, steps, warmup, big, json_path, arch, threads):
     """Fire-model throughput: env-steps/s and burning-cell updates/s against the original's figures."""
-    from roshan import bench as b
     from roshan.runtime import init_taichi
+    from roshan.tools import bench as b
 
     used = init_taichi(arch or "cpu", threads)
     try:
@@ -414,8 +414,8 @@ def bench_fire(env_counts, steps, warmup, big, json_path, arch, threads):
 @THREADS
 def bench_env(env_counts, drones, fire_percentages, policies, min_env_steps, json_path, arch, threads):
     """FlyAgent env throughput: env only, and with FlyAgent network inference, against the original."""
-    from roshan import bench as b
     from roshan.runtime import init_taichi
+    from roshan.tools import bench as b
 
     init_taichi(arch or "cpu", threads)
     try:

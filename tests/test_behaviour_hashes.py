@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 import torch
 
-from roshan.config import Config, DroneConfig, IgnitionConfig
-from roshan.env.fly import FlyConfig, FlyVectorEnv
-from roshan.env.planner import PlannerConfig, PlannerVectorEnv
+from roshan.config import Config, DroneConfig, FlyConfig, IgnitionConfig, PlannerConfig
+from roshan.env.fly import FlyVectorEnv
+from roshan.env.planner import PlannerVectorEnv
 from roshan.kernels.fire import FireSim
 from roshan.maps import load_map
 

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from roshan import report
+from roshan.runs import report
 
 T_9 = 2.262157  # t_{0.975, 9} from a printed t table
 

@@ -20,9 +20,9 @@ from click.testing import CliRunner
 from optuna.distributions import CategoricalDistribution, FloatDistribution, IntDistribution
 from optuna.trial import TrialState
 
-from roshan import study as st
 from roshan.cli import main
-from roshan.run import RunConfig, load_run_config
+from roshan.config import Config, load_run_config
+from roshan.study import runner as st
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIG = REPO / "configs" / "fly_simple.yaml"
@@ -36,7 +36,7 @@ SPACE = {"params": {"fly.rewards.goal": {"type": "float", "low": 0.2, "high": 5.
 
 
 def parse(space: dict):
-    return st.parse_space(space, RunConfig(), where="space.yaml")
+    return st.parse_space(space, Config(), where="space.yaml")
 
 
 def one_param(spec: dict, key: str = "fly.rewards.goal") -> dict:
@@ -88,7 +88,7 @@ def test_shipped_search_spaces():
 def test_yaml_numbers_without_a_dot_are_read_as_numbers(tmp_path):
     path = tmp_path / "s.yaml"
     path.write_text("params:\n  ppo.lr: {type: float, low: 1e-5, high: 1e-3, log: true}\n")
-    (p,) = st.load_space(path, RunConfig()).params
+    (p,) = st.load_space(path, Config()).params
     assert (p.low, p.high) == (1e-5, 1e-3)
 
 

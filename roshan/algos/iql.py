@@ -8,7 +8,6 @@ import copy
 import math
 from collections import defaultdict
 from collections.abc import Iterable
-from dataclasses import dataclass, field
 
 import torch
 
@@ -16,31 +15,10 @@ from roshan.algos.buffers import ReplayBatch, ReplayBuffer
 from roshan.algos.distributions import ClippedGaussian, TanhNormal
 from roshan.algos.networks import MeanActor, TwinQ, ValueNet, check_meta, frozen_copy, soft_update, to_device
 from roshan.algos.normalize import RewardScaler
-from roshan.algos.optim import OptimConfig, make_optimizer, make_scheduler
-from roshan.config import num
+from roshan.algos.optim import make_optimizer, make_scheduler
+from roshan.config import IQLConfig
 
 POLICY_LOG_STD = -3.0  # the AWR policy's fixed std exp(-3) ~ 0.0498 (learning.md 4)
-
-
-@dataclass(frozen=True)
-class IQLConfig:
-    """IQL hyperparameters; defaults are thesis Table 5.2 and the newest config (learning.md 14.1, 14.5)."""
-
-    lr: float = num(1.575e-4, 0.0, lo_open=True, doc="learning rate of actor, critic and value")
-    batch_size: int = num(250, 1, doc="transitions per minibatch")
-    gamma: float = num(0.99, 0.0, 1.0, doc="discount")
-    expectile: float = num(0.7, 0.0, 1.0, lo_open=True, hi_open=True, doc="expectile tau of the value loss")
-    temperature: float = num(3.0, 0.0, doc="inverse temperature beta of the advantage weights")
-    tau: float = num(0.005, 0.0, 1.0, lo_open=True, doc="soft update rate of the target critic")
-    offline_updates: int = num(10, 0, doc="full passes over the saved dataset")
-    online_updates: int = num(0, 0, doc="online update calls after the offline phase")
-    policy_freq: int = num(50, 1, doc="online: env steps between update calls")
-    k_epochs: int = num(1, 1, doc="online: minibatches per update call")
-    share_encoder: bool = True  # critic and value read the actor's encoder (learning.md 1, 2.3)
-    use_tanh_dist: bool = True  # TanhNormal policy around mu; False: Gaussian around tanh(mu), clipped
-    broadcast_defect: bool = False  # reproduce the reference's (B, B) Q target (learning.md 8)
-    max_weight: float = num(100.0, 0.0, lo_open=True, doc="upper clip of the advantage weights")
-    optim: OptimConfig = field(default_factory=OptimConfig)
 
 
 def expectile_loss(u: torch.Tensor, tau: float) -> torch.Tensor:

@@ -1,32 +1,12 @@
 """Optimisers and learning-rate schedules from config, shared by PPO, TD3 and IQL (learning.md 6.3)."""
 
-from dataclasses import dataclass
 
 import torch
 
-from roshan.config import choice, num
+from roshan.config import OptimConfig
 
 OPTIMIZERS = {"adam": torch.optim.Adam, "adamw": torch.optim.AdamW, "sgd": torch.optim.SGD,
               "rmsprop": torch.optim.RMSprop, "radam": torch.optim.RAdam}
-SCHEDULERS = ("cosine", "cosine_restarts", "step", "exponential", "constant", "none")
-
-
-@dataclass(frozen=True)
-class OptimConfig:
-    """Optimiser and schedule. Defaults are the thesis-era ones: Adam(0.9, 0.999, eps 1e-5) with a cosine
-    schedule of T_max 1e6 steps, stepped per gradient step (effectively constant over a run)."""
-
-    name: str = choice("adam", tuple(OPTIMIZERS))
-    beta1: float = num(0.9, 0.0, 1.0, hi_open=True)
-    beta2: float = num(0.999, 0.0, 1.0, hi_open=True)
-    eps: float = num(1e-5, 0.0, lo_open=True)
-    weight_decay: float = num(0.0, 0.0)
-    momentum: float = num(0.0, 0.0, 1.0, doc="SGD / RMSprop momentum")
-    scheduler: str = choice("cosine", SCHEDULERS)
-    t_max: int = num(1_000_000, 1, doc="cosine: steps per half period")
-    step_size: int = num(10_000, 1, doc="step: steps between decays")
-    decay: float = num(0.99, 0.0, 1.0, lo_open=True, doc="step / exponential: factor per decay")
-    min_lr: float = num(0.0, 0.0, doc="cosine: eta_min")
 
 
 def make_optimizer(params, lr: float, cfg: OptimConfig) -> torch.optim.Optimizer:

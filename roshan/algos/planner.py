@@ -8,7 +8,6 @@ An action is (B, N) long: one candidate index per drone.
 """
 
 import math
-from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import torch
@@ -17,10 +16,10 @@ from torch import nn
 
 from roshan.algos.networks import layer_init
 from roshan.algos.normalize import RewardScaler
-from roshan.algos.optim import OptimConfig, make_optimizer, make_scheduler
+from roshan.algos.optim import make_optimizer, make_scheduler
 from roshan.algos.ppo import clip_gradients, explained_variance, minibatch_loss, normalized_advantages
 from roshan.algos.returns import gae
-from roshan.config import choice, num
+from roshan.config import PlannerPPOConfig
 
 HIDDEN = 64
 HEADS = 4
@@ -289,29 +288,6 @@ PLANNER_NETS = {"thesis": ThesisPlannerNet, "pointer": PointerPlannerNet}
 
 
 # ---------------------------------------------------------------------------------------------- PPO
-
-
-@dataclass(frozen=True)
-class PlannerPPOConfig:
-    """Planner PPO hyperparameters; defaults are thesis Table 5.8 / the P3 configuration (learning.md 14.3)."""
-
-    lr: float = num(1e-4, 0.0, lo_open=True)
-    horizon: int = num(4800, 1, doc="planner transitions (all envs) collected per update")
-    batch_size: int = num(1200, 1, doc="minibatch size in planner transitions")
-    k_epochs: int = num(3, 1)
-    gamma: float = num(0.99, 0.0, 1.0, doc="Table 5.8 (the P3 config file has 0.999)")
-    lam: float = num(0.98, 0.0, 1.0, doc="GAE lambda")
-    eps_clip: float = num(0.2, 0.0, 1.0, lo_open=True)
-    value_loss_coef: float = num(0.001, 0.0)
-    entropy_coeff: float = num(0.0005, 0.0)
-    max_grad_norm: float = num(0.5, 0.0, doc="per parameter group; 0 = off (the thesis-era code never clipped)")
-    kl_early_stop: bool = False
-    kl_target: float = num(0.03, 0.0, lo_open=True)
-    kl_estimator: str = choice("k1", ("k1", "k2"))
-    network: str = choice("thesis", ("thesis", "pointer"), doc="learning.md 3.1 (thesis) or 3.2 (newest)")
-    reward_eps: float = num(1e-8, 0.0, doc="added to the running variance (thesis-era 1e-8, newest 1e-4)")
-    bootstrap_truncated: bool = True  # False: a timeout ends the trace like a terminal (the reference)
-    optim: OptimConfig = field(default_factory=OptimConfig)
 
 
 class PlannerRollout(NamedTuple):

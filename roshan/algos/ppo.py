@@ -7,7 +7,6 @@ ends every drone's trace (the reference keeps per-drone flags; learning.md 6.2 s
 """
 
 import math
-from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import torch
@@ -16,39 +15,9 @@ from torch import nn
 from roshan.algos.distributions import ClippedGaussian, TanhNormal
 from roshan.algos.networks import ActorCritic
 from roshan.algos.normalize import RewardScaler
-from roshan.algos.optim import OptimConfig, make_optimizer, make_scheduler
+from roshan.algos.optim import make_optimizer, make_scheduler
 from roshan.algos.returns import gae
-from roshan.config import choice, num
-
-
-@dataclass(frozen=True)
-class PPOConfig:
-    """PPO hyperparameters; defaults are thesis Table 5.2 (E1)."""
-
-    lr: float = num(1.575e-4, 0.0, lo_open=True)
-    horizon: int = num(1200, 1, doc="transitions (all drones) collected per update")
-    batch_size: int = num(300, 1, doc="minibatch size in transitions")
-    k_epochs: int = num(3, 1)
-    gamma: float = num(0.9635, 0.0, 1.0)
-    lam: float = num(0.9, 0.0, 1.0, doc="GAE lambda")
-    eps_clip: float = num(0.2, 0.0, 1.0, lo_open=True)
-    value_loss_coef: float = num(0.5, 0.0)
-    entropy_coeff: float = num(0.01, 0.0)
-    max_grad_norm: float = num(0.5, 0.0, doc="per parameter group; 0 = off (the thesis-era code never clipped)")
-    kl_early_stop: bool = False
-    kl_target: float = num(0.03, 0.0, lo_open=True)
-    kl_estimator: str = choice("k1", ("k1", "k2"))
-    log_std: str = choice("learned", ("learned", "train_step_decay", "log_step_decay"))
-    decay_rate: float = num(0.9999, 0.0, 1.0, lo_open=True)
-    share_encoder: bool = False
-    use_tanh_dist: bool = False
-    separate_optimizers: bool = False
-    reward_eps: float = num(1e-8, 0.0, doc="added to the running variance (thesis-era 1e-8, newest 1e-4)")
-    bootstrap_truncated: bool = True  # False: a timeout ends the trace like a terminal (the reference)
-    minibatch: str = choice("samples", ("samples", "sequences"),
-                            doc="samples: shuffled transitions (the reference); sequences: shuffled drones with "
-                                "their whole rollout, so each stacked frame is encoded once (about 3x cheaper)")
-    optim: OptimConfig = field(default_factory=OptimConfig)
+from roshan.config import PPOConfig
 
 
 class Rollout(NamedTuple):

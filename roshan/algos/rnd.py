@@ -4,24 +4,12 @@ A frozen random target MLP and a trained predictor MLP read the same flattened f
 ``obs["agent"]`` flattened); the prediction error is large on rarely seen inputs.
 """
 
-from dataclasses import dataclass
 
 import torch
 
 from roshan.algos.networks import mlp
 from roshan.algos.normalize import RewardScaler
-from roshan.config import num
-
-
-@dataclass(frozen=True)
-class RNDConfig:
-    """RND switches; off in every reference experiment (learning.md 15)."""
-
-    enabled: bool = False  # add the scaled intrinsic reward to the scaled extrinsic one
-    lr: float = num(1e-4, 0.0, lo_open=True, doc="predictor learning rate")
-    coef: float = num(1.0, 0.0, doc="weight of the scaled intrinsic reward in the sum")
-    hidden: int = num(256, 1, doc="hidden width of target and predictor")
-    out: int = num(256, 1, doc="embedding width of target and predictor")
+from roshan.config import RNDConfig
 
 
 class RND:

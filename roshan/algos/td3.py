@@ -6,34 +6,13 @@ Target policy smoothing, clipped double Q on raw rewards, a delayed actor and so
 
 import copy
 from collections import defaultdict
-from dataclasses import dataclass, field
 
 import torch
 
 from roshan.algos.buffers import ReplayBatch, ReplayBuffer
 from roshan.algos.networks import DeterministicActor, TwinQ, check_meta, frozen_copy, soft_update, to_device
-from roshan.algos.optim import OptimConfig, make_optimizer, make_scheduler
-from roshan.config import num
-
-
-@dataclass(frozen=True)
-class TD3Config:
-    """TD3 hyperparameters; defaults are thesis Table 5.2 (learning.md 14.1)."""
-
-    lr: float = num(1e-4, 0.0, lo_open=True, doc="learning rate of actor and critic")
-    batch_size: int = num(512, 1, doc="transitions per gradient iteration")
-    memory_size: int = num(1_000_000, 1, doc="replay capacity (transitions, all drones together)")
-    min_memory_size: int = num(30_000, 0, doc="stored transitions before the first update")
-    k_epochs: int = num(1, 1, doc="gradient iterations per update call (one call per env step)")
-    gamma: float = num(0.99, 0.0, 1.0, doc="discount")
-    tau: float = num(0.005, 0.0, 1.0, lo_open=True, doc="soft target update rate")
-    exploration_noise: float = num(0.15, 0.0, doc="std of the Gaussian action noise while collecting")
-    policy_noise: float = num(0.2, 0.0, doc="std of the target policy smoothing noise")
-    noise_clip: float = num(0.5, 0.0, doc="the smoothing noise is clipped to +-noise_clip")
-    policy_freq: int = num(2, 1, doc="critic iterations per actor (and target) update")
-    share_encoder: bool = False  # both Q heads read the actor's encoder (learning.md 1, 2.3)
-    broadcast_defect: bool = False  # reproduce the reference's (B,1)-vs-(B,) critic MSE (learning.md 7)
-    optim: OptimConfig = field(default_factory=OptimConfig)
+from roshan.algos.optim import make_optimizer, make_scheduler
+from roshan.config import TD3Config
 
 
 def smooth_target_actions(next_actions: torch.Tensor, noise: torch.Tensor, noise_clip: float) -> torch.Tensor:

@@ -12,8 +12,8 @@ import gymnasium as gym
 import numpy as np
 from pettingzoo import ParallelEnv
 
-from roshan.config import Config
-from roshan.env.fly import FlyConfig, FlyVectorEnv
+from roshan.config import Config, FlyConfig
+from roshan.env.fly import FlyVectorEnv
 from roshan.env.single import EPISODE_KEY, _check_render_mode, _FlyCore, build_configs
 
 

@@ -7,88 +7,26 @@ the actions, and since fire layouts and wind depend only on the env seed and the
 the heuristic evaluated with the same seed and number of envs play identical initial episodes.
 """
 
-import math
-from dataclasses import dataclass, field, replace
-from pathlib import Path
+from dataclasses import replace
 
 import gymnasium as gym
 import numpy as np
 import torch
 from gymnasium.vector import AutoresetMode
 
-from roshan.config import Config, choice, num
+from roshan.algos.frozen import FrozenFlyPolicy
+from roshan.config import CONTROLLERS, Config, PlannerConfig
 from roshan.env.fly import fly_obs_views
-from roshan.env.rewards import PlannerCoefficients, PlannerRewardConfig
+from roshan.episode import EPISODE_FIELDS
 from roshan.kernels import observe
 from roshan.kernels.drones import DroneSim
-from roshan.kernels.episode import EPISODE_FIELDS
 from roshan.kernels.explore import ExploreMaps
 from roshan.kernels.fire import FireSim
-from roshan.kernels.planner import PlannerKernels, obs_layout
+from roshan.kernels.planner import PlannerKernels, obs_layout, planner_time_limit
 from roshan.kernels.render import EnvZeroFrames
+from roshan.kernels.rewards import PlannerCoefficients
 from roshan.maps import load_map
 from roshan.runtime import ensure_taichi, torch_device
-
-CONTROLLERS = ("planner", "greedy")
-REPO_ROOT = Path(__file__).resolve().parents[2]
-
-
-@dataclass(frozen=True)
-class PlannerConfig:
-    """The planner level (agents.md 11, 13): timing, explorers, low-level policies, candidates, rewards."""
-
-    interval: int = num(5, 1, 100, doc="hierarchy_timesteps: low-level steps per planner decision")
-    fly_model: str = "models/fly_collision"  # frozen FlyAgent run folder or checkpoint for the planner drones
-    explorer_model: str = "models/fly_simple"  # frozen FlyAgent for the explorers
-    num_explorers: int = num(12, 1, 64, doc="ExploreFlyAgents (thesis 12; the root configs say 3)")
-    explorer_speed: float = num(20.0, 0.0, lo_open=True, doc="explorer max speed (m/s)")
-    explorer_view_range: int = num(20, 2, doc="explorer view range (cells); also the meander spacing")
-    meander: str = choice("newest", ("newest", "thesis"))
-    explorer_index_bound: str = choice("longest", ("first", "longest"),
-                                       doc="longest: every explorer flies its whole path, so every cell is seen; "
-                                           "first: the reference (explorer 0's path bounds the shared index)")
-    train_fires: str = choice("true", ("true", "detected"), doc="candidates in training: all burning cells "
-                                                                "(centralised) or the fire map")
-    eval_fires: str = choice("detected", ("true", "detected"), doc="candidates in evaluation")
-    time_limit: str = choice("newest", ("newest", "thesis"))  # T_max formulas of agents.md 5
-    burnout: float = num(0.30, 0.0, 1.0, doc="burned-out fraction that fails the episode")
-    max_candidates: int = num(0, 0, doc="candidate list length K (groundstation included); 0 = every cell + 1")
-    rewards: PlannerRewardConfig = field(default_factory=PlannerRewardConfig)
-
-
-def planner_time_limit(rows: int, cols: int, cell: float, dt: float, v_max: float, fire_percentage: float,
-                       version: str, k_turn: float = 1.5) -> int:
-    """T_max of a planner or heuristic episode (agents.md 5): newest ``max(t_move + F, ceil(4 T_phys))`` with
-    ``beta = 0.42``; thesis-era ``max(ceil((t_move + F dt) / dt), ceil(2 T_phys))`` with ``beta = 0.3``."""
-    area = rows * cols
-    fires = math.ceil(float(np.float32(fire_percentage)) * area)
-    t_phys = math.ceil(cell * math.sqrt(rows**2 + cols**2) / v_max * k_turn / dt)
-    if version == "newest":
-        length = 0.42 * math.sqrt(area * cell**2) * math.sqrt(fires)
-        return max(math.ceil(length / v_max / dt) + fires, math.ceil(4 * t_phys))
-    length = 0.3 * math.sqrt(area * cell**2) * math.sqrt(fires)
-    return max(math.ceil((length / v_max + fires * dt) / dt), math.ceil(2 * t_phys))
-
-
-class FrozenFlyPolicy:
-    """A trained FlyAgent (run folder or checkpoint) as a deterministic controller of a drone group."""
-
-    def __init__(self, target: str | Path):
-        from roshan.evaluate import load_agent, policy_fn
-
-        path = Path(target)
-        if not path.exists() and not path.is_absolute() and (REPO_ROOT / path).exists():
-            path = REPO_ROOT / path  # configs name the shipped models relative to the repository
-        if not path.exists():
-            raise FileNotFoundError(f"planner low-level FlyAgent {str(target)!r}: no such run folder or checkpoint "
-                                    "(set planner.fly_model / planner.explorer_model)")
-        self.config, agent, self.path = load_agent(path)
-        self.frames = self.config.fly.frames
-        self._act = policy_fn(agent)
-
-    def __call__(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
-        e, n = obs["agent"].shape[:2]
-        return self._act({k: v.flatten(0, 1) for k, v in obs.items()}).view(e, n, 2)
 
 
 class PlannerVectorEnv(gym.vector.VectorEnv):
@@ -128,9 +66,11 @@ class PlannerVectorEnv(gym.vector.VectorEnv):
         pc = planner or PlannerConfig()
         self.config, self.planner_config, self.controller = cfg, pc, controller
         self.evaluation, self.render_mode = evaluation, render_mode
-        self.fly_policy = fly_policy or FrozenFlyPolicy(pc.fly_model)
+        self.fly_policy = fly_policy or FrozenFlyPolicy(pc.fly_model, torch_device())
         move_explorers = evaluation or controller == "greedy"
-        self.explorer_policy = (explorer_policy or FrozenFlyPolicy(pc.explorer_model)) if move_explorers else None
+        self.explorer_policy = None
+        if move_explorers:
+            self.explorer_policy = explorer_policy or FrozenFlyPolicy(pc.explorer_model, torch_device())
         land = load_map(cfg.map.name, band=cfg.map.band or None, rows=cfg.map.uniform_rows,
                         cols=cfg.map.uniform_cols)
         self.fire = FireSim(land, cfg.fire, cfg.wind, cfg.ignition, num_envs=num_envs,

@@ -18,10 +18,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from roshan.config import Config
+from roshan.config import Config, FlyConfig
 from roshan.config import replace as replace_validated
-from roshan.env.fly import FlyConfig, FlyVectorEnv
-from roshan.kernels.episode import REASONS
+from roshan.env.fly import FlyVectorEnv
+from roshan.episode import REASONS
 
 # Not "episode": gymnasium's RecordEpisodeStatistics (and SB3's Monitor) write info["episode_stats"] themselves and
 # refuse an env that already fills it.

@@ -1,17 +1,15 @@
-"""The per-env episode record both vector envs write when an episode ends, and the failure reasons.
+"""Writing the episode record (:mod:`roshan.episode`) from inside the step kernels.
 
-One row per env, ``EPISODE_FIELDS`` in order; valid where the episode ended this step. The envs expose it
-as ``info["episode_stats"]``.
+One row per env, ``EPISODE_FIELDS`` in order; valid where the episode ended this step.
 """
 
 import taichi as ti
 
+from roshan.episode import EPISODE_FIELDS
 from roshan.kernels.fire import N_BURNED, N_EXTINGUISHED
 
-REASONS = ("none", "timeout", "boundary", "burnout", "collision")
-TIMEOUT, BOUNDARY, BURNOUT, COLLISION = 1, 2, 3, 4
-EP_SUCCESS, EP_REASON, EP_STEPS, EP_BURNED, EP_EXTINGUISHED, EP_RETURN = range(6)
-EPISODE_FIELDS = ("success", "reason", "steps", "burned_fraction", "extinguished", "return")
+EP_SUCCESS, EP_REASON, EP_STEPS, EP_BURNED, EP_EXTINGUISHED, EP_RETURN = (EPISODE_FIELDS.index(k) for k in (
+    "success", "reason", "steps", "burned_fraction", "extinguished", "return"))
 
 
 @ti.func

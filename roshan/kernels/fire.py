@@ -23,7 +23,7 @@ from roshan.kernels import particles as pt
 from roshan.kernels import rng
 from roshan.kernels.ignition import PATTERNS, light_initial_fires
 from roshan.maps import BURNED, BURNING, CLASSES, FLOODED, GENERIC_UNBURNED, LandCoverMap
-from roshan.runtime import check_field_room, ensure_taichi
+from roshan.runtime import check_field_room, current_arch, ensure_taichi
 
 # Cell records: integers (state, flags, visit stamp, emission periods) and f64 timers (seconds).
 C_STATE, C_FLAGS, C_VISIT, C_PERIODS = range(4)
@@ -70,8 +70,6 @@ def env_loop_padding(num_envs: int) -> int:
     ``num_envs * pad`` indices instead, and only every ``pad``-th does an env's work, so that even 2 envs
     land in different tasks. Measured: two threads busy at every E instead of one below E = 1024.
     """
-    from roshan.runtime import current_arch
-
     if current_arch() not in (None, "cpu") or num_envs == 1:
         return 1  # GPUs schedule one thread per iteration anyway; one env is one task whatever the padding
     import taichi.lang.impl as impl

@@ -20,16 +20,32 @@ and 5 global features. Positions are normalised by the map: ``2 q / max(rows, co
 
 import math
 
+import numpy as np
 import taichi as ti
 
-from roshan.env.rewards import planner_outcome_reward, planner_step_reward
+from roshan.episode import BURNOUT, TIMEOUT
 from roshan.kernels import observe
 from roshan.kernels.drones import DroneSim
-from roshan.kernels.episode import BURNOUT, TIMEOUT, write_record
+from roshan.kernels.episode import write_record
 from roshan.kernels.explore import ExploreMaps
 from roshan.kernels.fire import N_BURNED, N_BURNING, FireSim
+from roshan.kernels.rewards import planner_outcome_reward, planner_step_reward
 
 GROUND_GOAL = -2  # goal_cell of a drone sent to the groundstation by the planner
+
+
+def planner_time_limit(rows: int, cols: int, cell: float, dt: float, v_max: float, fire_percentage: float,
+                       version: str, k_turn: float = 1.5) -> int:
+    """T_max of a planner or heuristic episode (agents.md 5): newest ``max(t_move + F, ceil(4 T_phys))`` with
+    ``beta = 0.42``; thesis-era ``max(ceil((t_move + F dt) / dt), ceil(2 T_phys))`` with ``beta = 0.3``."""
+    area = rows * cols
+    fires = math.ceil(float(np.float32(fire_percentage)) * area)
+    t_phys = math.ceil(cell * math.sqrt(rows**2 + cols**2) / v_max * k_turn / dt)
+    if version == "newest":
+        length = 0.42 * math.sqrt(area * cell**2) * math.sqrt(fires)
+        return max(math.ceil(length / v_max / dt) + fires, math.ceil(4 * t_phys))
+    length = 0.3 * math.sqrt(area * cell**2) * math.sqrt(fires)
+    return max(math.ceil((length / v_max + fires * dt) / dt), math.ceil(2 * t_phys))
 
 
 def obs_layout(num_drones: int, max_candidates: int) -> dict[str, tuple[int, int]]:

@@ -9,11 +9,12 @@ import pytest
 import torch
 
 from roshan.algos.buffers import ReplayBuffer
-from roshan.algos.iql import IQL, IQLConfig, awr_weights, expectile_loss, iql_q_loss
+from roshan.algos.iql import IQL, awr_weights, expectile_loss, iql_q_loss
 from roshan.algos.networks import DeterministicActor, TwinQ, ValueNet
 from roshan.algos.normalize import RewardScaler
-from roshan.algos.rnd import RND, RNDConfig
-from roshan.algos.td3 import TD3, TD3Config, critic_mse, smooth_target_actions, td3_target
+from roshan.algos.rnd import RND
+from roshan.algos.td3 import TD3, critic_mse, smooth_target_actions, td3_target
+from roshan.config import IQLConfig, RNDConfig, TD3Config
 
 K = 3  # neighbour slots
 SHAPES = {"agent": (3, 9), "neighbors": (3, K, 4), "neighbors_mask": (3, K)}

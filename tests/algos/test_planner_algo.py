@@ -3,14 +3,8 @@
 import pytest
 import torch
 
-from roshan.algos.planner import (
-    PlannerPPO,
-    PlannerPPOConfig,
-    PlannerRollout,
-    PointerPlannerNet,
-    ThesisPlannerNet,
-    trim_candidates,
-)
+from roshan.algos.planner import PlannerPPO, PlannerRollout, PointerPlannerNet, ThesisPlannerNet, trim_candidates
+from roshan.config import PlannerPPOConfig
 
 NETS = [ThesisPlannerNet, PointerPlannerNet]
 

@@ -6,7 +6,8 @@ import pytest
 import torch
 
 from roshan.algos.normalize import RewardScaler
-from roshan.algos.ppo import PPO, FrameCache, PPOConfig, Rollout, approx_kl, clipped_surrogate, explained_variance
+from roshan.algos.ppo import PPO, FrameCache, Rollout, approx_kl, clipped_surrogate, explained_variance
+from roshan.config import PPOConfig
 
 
 def test_clipped_surrogate_by_hand():

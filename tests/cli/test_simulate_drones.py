@@ -13,11 +13,11 @@ from click.testing import CliRunner
 from PIL import Image
 
 from roshan.cli import main
-from roshan.config import Config, DroneConfig
-from roshan.env.fly import FlyConfig, FlyVectorEnv
+from roshan.config import Config, DroneConfig, FlyConfig
+from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import random_actions, straight_to_goal
 from roshan.kernels.render import FrameRenderer, drone_colours, drone_overlay
-from roshan.simulate import DRONE_SERIES_KEYS, SERIES_KEYS
+from roshan.tools.simulate import DRONE_SERIES_KEYS, SERIES_KEYS
 
 CELLS_PER_STEP = 0.1  # v_max * dt / cell size with the default drone physics (10 m/s, 0.1 s, 10 m)
 

@@ -17,7 +17,7 @@ from roshan.config import Config, DroneConfig
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.pettingzoo import FlyParallelEnv
 from roshan.env.single import EPISODE_KEY, FlyEnv
-from roshan.kernels.episode import REASONS
+from roshan.episode import REASONS
 
 ENV_ID = "roshan/FlyAgent-v0"
 N = 2

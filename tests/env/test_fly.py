@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 import torch
 
-from roshan.config import Config, DroneConfig, IgnitionConfig, WindConfig
-from roshan.env.fly import FlyConfig, FlyVectorEnv, time_limit
-from roshan.kernels.episode import REASONS
+from roshan.config import Config, DroneConfig, FlyConfig, IgnitionConfig, WindConfig
+from roshan.env.fly import FlyVectorEnv
+from roshan.episode import REASONS
+from roshan.kernels.fly import time_limit
 from roshan.maps import BURNING
 
 EMPTY = IgnitionConfig(fire_percentage=0.0)

@@ -8,15 +8,18 @@ import pytest
 import taichi as ti
 import torch
 
-from roshan.config import Config, DroneConfig, IgnitionConfig, WindConfig
-from roshan.env.planner import PlannerConfig, PlannerVectorEnv, planner_time_limit
-from roshan.env.rewards import (
+from roshan.config import (
     PLANNER_PRESETS,
-    PlannerCoefficients,
+    Config,
+    DroneConfig,
+    IgnitionConfig,
+    PlannerConfig,
     PlannerRewardConfig,
-    planner_outcome_reward,
-    planner_step_reward,
+    WindConfig,
 )
+from roshan.env.planner import PlannerVectorEnv
+from roshan.kernels.planner import planner_time_limit
+from roshan.kernels.rewards import PlannerCoefficients, planner_outcome_reward, planner_step_reward
 
 MODEL = str(Path(__file__).resolve().parents[2] / "models" / "fly_simple")
 FIRES = IgnitionConfig(fire_percentage=0.05, clusters=2)

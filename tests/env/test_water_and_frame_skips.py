@@ -5,10 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from roshan.config import Config, ConfigError, DroneConfig, IgnitionConfig, WindConfig, from_dict
-from roshan.env.fly import FlyConfig, FlyVectorEnv, time_limit
+from roshan.config import Config, ConfigError, DroneConfig, FlyConfig, IgnitionConfig, WindConfig, from_dict
+from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import straight_to_goal
-from roshan.kernels.episode import REASONS
+from roshan.episode import REASONS
+from roshan.kernels.fly import time_limit
 from roshan.maps import BURNING
 
 EMPTY = IgnitionConfig(fire_percentage=0.0)

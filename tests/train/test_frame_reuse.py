@@ -3,13 +3,14 @@ stacked observation, on real rollouts of the collision env (episodes restart ins
 
 import torch
 
-from roshan.algos.ppo import PPO, FrameCache, PPOConfig, gather_stacks, stack_index
-from roshan.run import RunConfig
-from roshan.train import PPOCollector, make_env
+from roshan.algos.ppo import PPO, FrameCache, gather_stacks, stack_index
+from roshan.config import Config, PPOConfig
+from roshan.runs.envs import make_env
+from roshan.runs.train import PPOCollector
 
 
 def collision_run(num_envs=4, horizon=4 * 4 * 24, **ppo):
-    cfg = RunConfig()
+    cfg = Config()
     fly = cfg.fly.__class__(policy="complex", collision=True)
     ppo_cfg = PPOConfig(horizon=horizon, batch_size=horizon // 2, use_tanh_dist=True, share_encoder=False, **ppo)
     return cfg.__class__(fly=fly, ppo=ppo_cfg, train=cfg.train.__class__(num_envs=num_envs, seed=3))

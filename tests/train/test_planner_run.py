@@ -6,8 +6,8 @@ from pathlib import Path
 
 from click.testing import CliRunner
 
+from roshan.checkpoints import checkpoint_path, load_checkpoint
 from roshan.cli import main
-from roshan.run import checkpoint_path, load_checkpoint
 
 ROOT = Path(__file__).resolve().parents[2]
 MODEL = ROOT / "models" / "fly_simple"

@@ -12,8 +12,8 @@ import pytest
 import torch
 from click.testing import CliRunner
 
+from roshan.checkpoints import checkpoint_path, load_checkpoint
 from roshan.cli import main
-from roshan.run import checkpoint_path, load_checkpoint
 
 ROOT = Path(__file__).resolve().parents[2]
 TINY = ["--set", "train.num_envs=4", "--set", "ppo.horizon=128", "--set", "ppo.batch_size=64",
@@ -157,7 +157,7 @@ def test_td3_and_iql_run_end_to_end(tmp_path):
 
 
 def test_auto_train_seeds_and_periodic_evaluation(tmp_path):
-    from roshan.report import read_tensorboard_scalars
+    from roshan.runs.report import read_tensorboard_scalars
 
     res = cli("train", ROOT / "configs/fly_simple.yaml", "--root", tmp_path, "--name", "auto", "--quiet", *TINY,
               "--set", "train.max_updates=2", "--set", "train.auto_train=2", "--set", "train.seed=7",

@@ -8,9 +8,26 @@ from pathlib import Path
 
 import numpy as np
 
-from roshan.config import Config, IgnitionConfig, MapConfig, SimConfig, WindConfig
+from roshan.algos.agents import make_agent
+from roshan.algos.frozen import load_agent
+from roshan.algos.networks import flatten_drones
+from roshan.algos.ppo import PPO, FrameCache
+from roshan.config import (
+    Config,
+    DroneConfig,
+    FlyConfig,
+    IgnitionConfig,
+    MapConfig,
+    PPOConfig,
+    SimConfig,
+    WindConfig,
+    load_run_config,
+)
+from roshan.env.fly import FlyVectorEnv
 from roshan.kernels.fire import FireSim
-from roshan.maps import load_map
+from roshan.maps import LandCoverMap, load_map
+from roshan.runs.envs import make_env
+from roshan.runs.train import PPOLearner
 
 REFERENCE_QUANTITIES = ("burning", "burned", "convection", "radiation")
 
@@ -36,7 +53,7 @@ FIDELITY_CONDITIONS = (
 def reference_dir() -> Path:
     """Where the reference CSVs live: $ROSHAN_REFERENCE if set, else the copy bundled with the package."""
     env = os.environ.get("ROSHAN_REFERENCE")
-    folder = Path(env) if env else Path(__file__).resolve().parent / "data" / "reference"
+    folder = Path(env) if env else Path(__file__).resolve().parents[1] / "data" / "reference"
     if not (folder / "woods35x36_p0015.csv").exists():
         raise FileNotFoundError(f"{folder}: no reference CSVs (woods35x36_p0015.csv, ...); set ROSHAN_REFERENCE")
     return folder
@@ -143,8 +160,6 @@ ORIGINAL_STEPS_PER_S = {
 
 def tiled_map(name: str = "Borkenberge", target_cells: int = 1_000_000):
     """A ~``target_cells`` map made by tiling a bundled map (mirrored, so tiles join without seams)."""
-    from roshan.maps import LandCoverMap
-
     base = load_map(name)
     a = base.classes
     reps = int(np.ceil(np.sqrt(target_cells / a.size)))
@@ -263,8 +278,8 @@ def plot_fidelity(results: dict, path: Path) -> Path:
 
 # ---------------------------------------------------------------------------------------------- FlyAgent env
 
-CONFIGS = Path(__file__).resolve().parent.parent / "configs"
-SHIPPED_COLLISION_MODEL = Path(__file__).resolve().parent.parent / "models" / "fly_collision"
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+SHIPPED_COLLISION_MODEL = Path(__file__).resolve().parents[2] / "models" / "fly_collision"
 ORIGINAL_FLY_EVAL_STEPS_PER_S = 935  # collision FlyAgent evaluation incl. policy inference, 35x36 at 1.5 %
 
 
@@ -283,19 +298,12 @@ def time_env(envs: int, drones: int, fire_percentage: float, steps: int, policy:
         return time_training(envs, drones, fire_percentage, steps, policy.split("+")[0], seed)
     import torch
 
-    from roshan.algos.networks import flatten_drones
-    from roshan.algos.ppo import PPO, FrameCache, PPOConfig
-    from roshan.config import DroneConfig
-    from roshan.env.fly import FlyConfig, FlyVectorEnv
-
     cfg = Config(ignition=IgnitionConfig(fire_percentage=fire_percentage), drones=DroneConfig(num_drones=drones))
     env = FlyVectorEnv(envs, cfg, FlyConfig(policy="complex", collision=collision), seed=seed)
     obs, _ = env.reset(seed=seed)
     cache, restarted = FrameCache(), None
     gen = torch.Generator().manual_seed(seed)
     if policy == "fly_collision":  # trained, deterministic: what evaluation runs
-        from roshan.evaluate import load_agent
-
         network = load_agent(SHIPPED_COLLISION_MODEL)[1].act_mode
     elif policy is not None:  # untrained, sampling: what a rollout runs
         agent = PPO(PPOConfig(use_tanh_dist=True), collision=policy == "collision")
@@ -325,9 +333,6 @@ def time_env(envs: int, drones: int, fire_percentage: float, steps: int, policy:
 def time_training(envs: int, drones: int, fire_percentage: float, steps: int, network: str, seed: int = 0) -> dict:
     """Env-steps/s of PPO training (rollout + update) with the config of the given network's setting."""
     import torch
-
-    from roshan.run import load_run_config
-    from roshan.train import PPOLearner, make_agent, make_env
 
     name = "fly_collision" if network == "collision" else "fly_simple"
     per_rollout = 16

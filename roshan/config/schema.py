@@ -1,7 +1,8 @@
-"""Typed, frozen configuration dataclasses with YAML loading, ``--set`` overrides and validation.
+"""How config sections are declared, loaded and validated: ``num``/``choice`` fields, YAML loading, ``--set``
+overrides and one validator.
 
-Every section is a frozen dataclass whose defaults are the spec's (``shared/spec/firespin.md``). Each field
-declares its allowed range in ``metadata`` so one validator checks them all and errors name the key.
+Every section is a frozen dataclass whose defaults are the spec's (``shared/spec/``). Each field declares its
+allowed range in ``metadata`` so one validator checks them all and errors name the key.
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ import dataclasses
 import difflib
 import types
 import typing
-from dataclasses import dataclass, field
+from dataclasses import field
 from pathlib import Path
 from typing import Any
 
@@ -36,118 +37,10 @@ def choice(default, choices: tuple, doc=""):
     return field(default=default, metadata=_range(choices=choices, doc=doc))
 
 
-# ---------------------------------------------------------------------------------------------- sections
-
-
-@dataclass(frozen=True)
-class ConvectionConfig:
-    """Convection particles: Langevin SDE for hot gas / embers (firespin.md 7.1)."""
-
-    enabled: bool = True  # emit_convective
-    y_st: float = num(1.0, 0.0, lo_open=True, doc="initial intensity")
-    y_lim: float = num(0.2, 0.0, lo_open=True, doc="intensity below which a particle dies")
-    fl: float = num(0.15, 0.0, doc="position scaling factor F_l")
-    c0: float = num(1.98, 0.0, doc="Kolmogorov-like constant C_0")
-    tau_mem: float = num(10.0, 0.0, lo_open=True, doc="intensity decay time (s)")
-    lt: float = num(80.0, 0.0, lo_open=True, doc="integral length scale L_t (m)")
-
-
-@dataclass(frozen=True)
-class RadiationConfig:
-    """Radiation particles: random walk on a slowly growing circle (firespin.md 7.2)."""
-
-    enabled: bool = True  # emit_radiation
-    y_st: float = num(1.0, 0.0, lo_open=True, doc="initial intensity")
-    y_lim: float = num(0.165, 0.0, lo_open=True, doc="intensity below which a particle dies")
-
-
-@dataclass(frozen=True)
-class FireConfig:
-    """The FireSPIN cellular automaton (firespin.md 1-8)."""
-
-    dt: float = num(0.1, 0.0, 10.0, lo_open=True, doc="time step (s)")
-    flood_duration: float = num(5.0, 0.0, doc="how long a flooded cell stays flooded (s)")
-    uniform_ignition_time: float = num(100.0, 0.0, lo_open=True, doc="tau_ign on the uniform map (s)")
-    uniform_burning_time: float = num(120.0, 0.0, lo_open=True, doc="tau_burn on the uniform map (s)")
-    convection: ConvectionConfig = field(default_factory=ConvectionConfig)
-    radiation: RadiationConfig = field(default_factory=RadiationConfig)
-    conv_capacity: int = num(0, 0, doc="convection particles per env; 0 = auto from the map size")
-    rad_capacity: int = num(0, 0, doc="radiation particles per env; 0 = auto from the map size")
-
-
-@dataclass(frozen=True)
-class WindConfig:
-    """Constant wind per episode (firespin.md 6)."""
-
-    speed: float = num(10.0, 0.0, 100.0, doc="10-m wind speed U_w (m/s)")
-    direction: float = num(-1.0, -1.0, 360.0, hi_open=True,
-                           doc="degrees from the row axis (south) towards the column axis (east); -1 = random")
-    turbulence: float = num(0.314, 0.0, doc="turbulence ratio a (u' = a * U_w)")
-
-
-@dataclass(frozen=True)
-class IgnitionConfig:
-    """The initial fire generator (firespin.md 11, newest code)."""
-
-    fire_percentage: float = num(0.015, 0.0, 1.0, doc="fraction of all cells to ignite")
-    clusters: int = num(2, 1, doc="number of clusters (or rings)")
-    spread_prob: float = num(0.5, 0.0, 1.0, doc="base probability that a cluster grows into a neighbour")
-    noise: float = num(1.0, 0.0, 2.0, doc="amplitude of the perturbation of spread_prob")
-    pattern: str = choice("cluster", ("cluster", "scattered", "ring", "random"))
-
-
-@dataclass(frozen=True)
-class DroneConfig:
-    """FlyAgent drones (agents.md 1, 3, 4, 14): physics, sensing, start layout and water."""
-
-    num_drones: int = num(4, 1, 64, doc="drones per env")
-    max_speed: float = num(10.0, 0.0, lo_open=True, doc="v_max per axis (m/s)")
-    view_range: int = num(10, 2, doc="view range (cells)")
-    drone_size: float = num(2.0, 0.0, lo_open=True, doc="drone radius used by the collision test (m)")
-    use_vel_bins: bool = True  # actions rounded to 41 levels (steps of 0.05)
-    use_velocity_change: bool = False  # acceleration mode: v += a * (v_max / 2) * dt
-    groundstation_start_percentage: float = num(1.0, 0.0, 1.0, doc="chance a drone starts at the groundstation")
-    use_water_limit: bool = False  # finite tank, newest code (agents.md 14); off in the thesis experiments
-    water_capacity: float = num(4.0, 0.0, lo_open=True, doc="tank size in drops (one drop puts out one cell)")
-    recharge_time: float = num(2.0, 0.0, doc="seconds an empty tank takes to refill at the groundstation")
-
-
-@dataclass(frozen=True)
-class MapConfig:
-    """Which land-cover map to simulate."""
-
-    name: str = "35x36_Woods"  # bundled map name, "uniform", or a path to a CLC+ GeoTIFF
-    band: int = num(0, 0, doc="raster band (1-based) for multi-band files; 0 = the only band")
-    uniform_rows: int = num(50, 1, doc="rows of the uniform map")
-    uniform_cols: int = num(50, 1, doc="columns of the uniform map")
-
-
-@dataclass(frozen=True)
-class SimConfig:
-    """Batch size, seed and where the kernels run."""
-
-    envs: int = num(1, 1, doc="environments advanced together")
-    seed: int = num(0, 0, 2**31 - 1, doc="seed of every random stream")
-    arch: str = choice("cpu", ("cpu", "cuda", "vulkan", "auto"))
-    threads: int = num(0, 0, doc="CPU threads; 0 = all cores")
-
-
-@dataclass(frozen=True)
-class Config:
-    """A whole run: map, fire physics, wind, ignition and the simulator batch."""
-
-    map: MapConfig = field(default_factory=MapConfig)
-    fire: FireConfig = field(default_factory=FireConfig)
-    wind: WindConfig = field(default_factory=WindConfig)
-    ignition: IgnitionConfig = field(default_factory=IgnitionConfig)
-    drones: DroneConfig = field(default_factory=DroneConfig)
-    sim: SimConfig = field(default_factory=SimConfig)
-
-
 # ---------------------------------------------------------------------------------------------- loading
 
 
-def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = (), cls: type = Config):
+def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = (), *, cls: type):
     """Load ``path`` (YAML) into ``cls``, apply ``key.sub=value`` overrides and validate everything.
 
     Raises:
@@ -189,7 +82,7 @@ def from_dict(cls: type, data: dict, where: str = "config", prefix: str = ""):
     for key in data:
         if key not in fields:
             valid = [prefix + name for name in fields]
-            raise ConfigError(f"{where}: unknown key {prefix + str(key)!r}{_suggest(prefix + str(key), valid)}")
+            raise ConfigError(f"{where}: unknown key {prefix + str(key)!r}{suggest(prefix + str(key), valid)}")
     kwargs = {}
     for name, value in data.items():
         hint = hints[name]
@@ -216,7 +109,7 @@ def replace(cfg, **changes):
     return from_dict(type(cfg), {**to_dict(cfg), **changes}, where="replace")
 
 
-def all_keys(cls: type = Config, prefix: str = "") -> list[str]:
+def all_keys(cls: type, prefix: str = "") -> list[str]:
     """Every dotted key of a config class (for help texts and suggestions)."""
     keys = []
     for f in dataclasses.fields(cls):
@@ -234,7 +127,7 @@ def _apply_override(data: dict, item: str, cls: type) -> None:
     dotted, raw = item.split("=", 1)
     parts = dotted.strip().split(".")
     if dotted.strip() not in all_keys(cls):
-        raise ConfigError(f"--set: unknown key {dotted.strip()!r}{_suggest(dotted.strip(), all_keys(cls))}")
+        raise ConfigError(f"--set: unknown key {dotted.strip()!r}{suggest(dotted.strip(), all_keys(cls))}")
     node = data
     for p in parts[:-1]:
         node = node.setdefault(p, {})
@@ -246,7 +139,7 @@ def _apply_override(data: dict, item: str, cls: type) -> None:
         raise ConfigError(f"--set {item!r}: cannot parse value ({exc})") from exc
 
 
-def _suggest(key: str, valid) -> str:
+def suggest(key: str, valid) -> str:
     close = difflib.get_close_matches(key, list(valid), n=1, cutoff=0.5)
     if not close and "." in key:
         close = difflib.get_close_matches(key.split(".")[-1], [v.split(".")[-1] for v in valid], n=1, cutoff=0.5)

@@ -1,5 +1,6 @@
-"""FlyAgent (agents.md 8) and PlannerAgent (agents.md 13.5) reward terms and their coefficient sets: the one
-place rewards are defined.
+"""FlyAgent (agents.md 8) and PlannerAgent (agents.md 13.5) reward terms: the one place rewards are paid.
+
+The presets and the config sections that choose them are in :mod:`roshan.config.agents`.
 
 The coefficients are compile-time constants of the step kernel; :func:`fly_reward` is the ``ti.func`` it
 calls once per drone per step.
@@ -9,33 +10,9 @@ from dataclasses import dataclass, fields
 
 import taichi as ti
 
-from roshan.config import choice, num
+from roshan.config.agents import PLANNER_NEWEST_TERMS, PLANNER_PRESETS, PRESETS, PlannerRewardConfig, RewardConfig
 
-# Thesis Table 5.3 (defaults), Table 5.4 (best single Optuna trial), Table 5.5 (mean of the top-10 trials).
-PRESETS: dict[str, dict[str, float]] = {
-    "thesis": {"goal": 1.0, "boundary": -1.0, "extinguish": 0.01, "timeout": -1.0, "collision": -1.0,
-               "progress": 0.1, "proximity": -0.05},
-    "optuna_best": {"goal": 0.230, "boundary": -4.737, "extinguish": 0.0128, "timeout": -3.050,
-                    "collision": -4.737, "progress": 0.278, "proximity": -0.189},
-    "optuna_top10": {"goal": 0.8785929835, "boundary": -4.3280085652, "extinguish": 0.0072352109,
-                     "timeout": -3.7322366112, "collision": -4.3280085652, "progress": 0.2955909834,
-                     "proximity": -0.1150000819},
-}
 PROXIMITY_THRESHOLD = 0.1  # normalised neighbour offset below which the proximity term counts
-
-
-@dataclass(frozen=True)
-class RewardConfig:
-    """A preset of coefficients; any field set here overrides the preset's value."""
-
-    preset: str = choice("thesis", tuple(PRESETS))
-    goal: float | None = None  # GoalReached
-    boundary: float | None = None  # BoundaryTerminal
-    extinguish: float | None = None  # Extinguish (complex policy)
-    timeout: float | None = None  # TimeOut
-    collision: float | None = None  # Collision (collision mode)
-    progress: float | None = num(None, 0.0, doc="DistanceImprovement per grid unit of progress")
-    proximity: float | None = None  # ProximityPenalty (collision mode)
 
 
 @dataclass(frozen=True)
@@ -105,40 +82,6 @@ def proximity_sum(entry) -> ti.f32:
 
 
 # ---------------------------------------------------------------------------------------------- PlannerAgent
-
-# agents.md 13.5: thesis Table 5.7 (best Optuna trial, P1 "Default") and Table 5.9 (mean of the top-10 trials,
-# the thesis-era and newest configs). The newest code's extra terms have one default set.
-PLANNER_PRESETS: dict[str, dict[str, float]] = {
-    "optuna_best": {"goal": 4.656, "burned": -0.886, "ground": -0.236, "timeout": -0.435, "same": -1.913,
-                    "extinguish": 0.523, "fast": 0.523},
-    "optuna_top10": {"goal": 3.9105863581302542, "burned": -2.1999479401238373, "ground": -0.29328248592328265,
-                     "timeout": -2.3843039593546047, "same": -1.552461776799054, "extinguish": 0.6054212968617818,
-                     "fast": 0.21654104693212245},
-}
-PLANNER_NEWEST_TERMS = {"distance": 0.1, "spread": 0.05, "refill": 0.5, "empty": -0.05}
-
-
-@dataclass(frozen=True)
-class PlannerRewardConfig:
-    """Planner reward: a preset of the thesis terms (any field set here overrides it); ``version = newest`` adds
-    DistanceProgress, SpreadPrevention (and with the water limit WaterRefill, EmptyTank) and makes the
-    groundstation and same-goal terms per drone as in the newest code."""
-
-    preset: str = choice("optuna_top10", tuple(PLANNER_PRESETS))
-    version: str = choice("thesis", ("thesis", "newest"))
-    goal: float | None = None  # GoalReached
-    burned: float | None = None  # MapBurnedTooMuch
-    ground: float | None = None  # FlyingTowardsGroundStation
-    timeout: float | None = None  # TimeOut
-    same: float | None = None  # SameGoalPenalty
-    extinguish: float | None = None  # ExtinguishFires, per cell
-    fast: float | None = None  # FastExtinguish, times the remaining fraction of the step limit
-    distance: float | None = None  # DistanceProgress (newest)
-    spread: float | None = None  # SpreadPrevention (newest)
-    refill: float | None = None  # WaterRefill (newest, water limit)
-    empty: float | None = None  # EmptyTank (newest, water limit)
-
-
 @dataclass(frozen=True)
 class PlannerCoefficients:
     goal: float

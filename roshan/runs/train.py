@@ -7,6 +7,7 @@ budget. A killed run resumes from ``latest`` with its counters, optimisers, rewa
 """
 
 import collections
+import json
 import math
 import time
 from collections.abc import Callable
@@ -15,14 +16,16 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from torch.utils.tensorboard import SummaryWriter
+from tqdm import tqdm
 
+from roshan.algos.agents import make_agent
+from roshan.algos.buffers import ReplayBuffer
+from roshan.algos.frozen import policy_fn
 from roshan.algos.networks import flatten_drones
-from roshan.algos.ppo import PPO, FrameCache, Rollout
-from roshan.config import dump_config
-from roshan.env.fly import FlyVectorEnv
-from roshan.kernels.episode import EPISODE_FIELDS, REASONS
-from roshan.run import (
-    RunConfig,
+from roshan.algos.planner import PlannerRollout
+from roshan.algos.ppo import FrameCache, PPO, Rollout
+from roshan.checkpoints import (
     check_same_model,
     checkpoint_path,
     config_dict,
@@ -32,38 +35,13 @@ from roshan.run import (
     resolve_checkpoint,
     save_checkpoint,
 )
-from roshan.runtime import ensure_taichi, init_taichi, torch_device
-
-FAILURES = ("collision", "boundary", "timeout", "burnout")
-
-
-def make_env(cfg: RunConfig, num_envs: int, seed: int, evaluation: bool = False, controller: str = "planner"):
-    """The run's vector env: FlyAgent, or planner (``evaluation``: explorers fly and the candidates are the
-    detected fires; ``controller="greedy"``: the heuristic baseline)."""
-    if cfg.train.algo == "planner":
-        from roshan.env.planner import PlannerVectorEnv
-
-        return PlannerVectorEnv(num_envs, cfg.env_config(), cfg.planner, evaluation=evaluation,
-                                controller=controller, seed=seed)
-    return FlyVectorEnv(num_envs=num_envs, config=cfg.env_config(), fly=cfg.fly, seed=seed)
-
-
-def make_agent(cfg: RunConfig, device: str | torch.device = "cpu"):
-    """The algorithm object of ``train.algo`` (PPO, TD3, IQL or the planner's PPO) with fresh networks."""
-    collision, frames = cfg.fly.collision, cfg.fly.frames
-    if cfg.train.algo == "ppo":
-        return PPO(cfg.ppo, collision, frames, device)
-    if cfg.train.algo == "planner":
-        from roshan.algos.planner import PlannerPPO
-
-        return PlannerPPO(cfg.planner_ppo, cfg.drones.num_drones, device)
-    if cfg.train.algo == "td3":
-        from roshan.algos.td3 import TD3
-
-        return TD3(cfg.td3, collision, frames, device)
-    from roshan.algos.iql import IQL
-
-    return IQL(cfg.iql, collision, frames, device)
+from roshan.config import Config, apply_overrides, dump_config
+from roshan.env.fly import FlyVectorEnv
+from roshan.episode import EPISODE_FIELDS, FAILURES, REASONS
+from roshan.runs import report
+from roshan.runs.envs import make_env
+from roshan.runs.evaluate import evaluate_run, run_episodes
+from roshan.runtime import current_arch, ensure_taichi, init_taichi, torch_device
 
 
 # ------------------------------------------------------------------------------------------------ episodes
@@ -175,7 +153,7 @@ class PPOCollector:
                        self.term, self.trunc)
 
 
-def rollout_steps(cfg: RunConfig) -> int:
+def rollout_steps(cfg: Config) -> int:
     """Env steps per PPO rollout: ``horizon`` transitions spread over envs x drones."""
     per_step = cfg.train.num_envs * cfg.drones.num_drones
     steps = cfg.ppo.horizon // per_step
@@ -188,7 +166,7 @@ def rollout_steps(cfg: RunConfig) -> int:
 class PPOLearner:
     """One iteration = a rollout of ``horizon`` transitions, then one PPO update."""
 
-    def __init__(self, cfg: RunConfig, env: FlyVectorEnv, agent: PPO):
+    def __init__(self, cfg: Config, env: FlyVectorEnv, agent: PPO):
         self.steps = rollout_steps(cfg)
         self.collector = PPOCollector(env, agent, self.steps)
         self.agent, self.env = agent, env
@@ -234,8 +212,7 @@ class TD3Learner:
 
     env_steps_per_iteration = 64
 
-    def __init__(self, cfg: RunConfig, env: FlyVectorEnv, agent):
-        from roshan.algos.buffers import ReplayBuffer
+    def __init__(self, cfg: Config, env: FlyVectorEnv, agent):
 
         obs, _ = env.reset()
         shapes = {k: tuple(v.shape[2:]) for k, v in obs.items()}
@@ -266,8 +243,7 @@ class IQLLearner:
     ``online_updates`` > 0, one iteration = ``policy_freq`` env steps with the IQL actor appended to the
     buffer, then one update of ``k_epochs`` minibatches (learning.md 8)."""
 
-    def __init__(self, cfg: RunConfig, env: FlyVectorEnv, agent):
-        from roshan.algos.buffers import ReplayBuffer
+    def __init__(self, cfg: Config, env: FlyVectorEnv, agent):
 
         if not cfg.train.buffer_path:
             raise ValueError("train.buffer_path: IQL learns from a saved replay buffer; record one with "
@@ -320,7 +296,6 @@ class PlannerCollector:
         self.stats = z(steps, E, len(EPISODE_FIELDS))
 
     def collect(self, generator: torch.Generator):
-        from roshan.algos.planner import PlannerRollout
 
         env, agent = self.env, self.agent
         self.trunc_values.zero_()
@@ -348,7 +323,7 @@ class PlannerLearner:
     """One iteration = ``planner_ppo.horizon`` decisions over the envs, then one PPO update. Steps count
     decisions (each is ``planner.interval`` low-level steps of every env)."""
 
-    def __init__(self, cfg: RunConfig, env, agent):
+    def __init__(self, cfg: Config, env, agent):
         E = cfg.train.num_envs
         self.steps = cfg.planner_ppo.horizon // E
         if self.steps < 1 or self.steps * E != cfg.planner_ppo.horizon:
@@ -364,7 +339,7 @@ class PlannerLearner:
         return self.steps * self.env.num_envs, metrics, rows
 
 
-def make_learner(cfg: RunConfig, env, agent):
+def make_learner(cfg: Config, env, agent):
     learners = {"ppo": PPOLearner, "td3": TD3Learner, "iql": IQLLearner, "planner": PlannerLearner}
     return learners[cfg.train.algo](cfg, env, agent)
 
@@ -390,7 +365,7 @@ class Progress:
 class Trainer:
     """One training run in ``run_dir`` (new or resumed)."""
 
-    def __init__(self, cfg: RunConfig, run_dir: Path, resume_state: dict | None = None, progress_bar: bool = True,
+    def __init__(self, cfg: Config, run_dir: Path, resume_state: dict | None = None, progress_bar: bool = True,
                  on_update: Callable[[dict], None] | None = None):
         self.cfg, self.run_dir = cfg, Path(run_dir)
         self.progress_bar, self.on_update = progress_bar, on_update
@@ -410,8 +385,7 @@ class Trainer:
         self.env = make_env(cfg, tc.num_envs, seed=tc.seed + 7919 * self.progress.updates)
         self.learner = make_learner(cfg, self.env, self.agent)
         self.eval_env = None
-        from torch.utils.tensorboard import SummaryWriter
-
+        
         self.writer = SummaryWriter(str(self.run_dir / "tb"), purge_step=self.progress.env_steps or None)
 
     def _init_weights(self, target: str) -> None:
@@ -448,8 +422,6 @@ class Trainer:
                 or (tc.max_minutes > 0 and p.seconds >= 60.0 * tc.max_minutes))
 
     def _bar(self):
-        from tqdm import tqdm
-
         tc = self.cfg.train
         total = tc.total_steps if tc.total_steps and tc.algo != "iql" else None
         return tqdm(total=total, initial=self.progress.env_steps if total else self.progress.updates,
@@ -512,9 +484,6 @@ class Trainer:
     def _periodic_eval(self) -> None:
         """Deterministic episodes with the current weights on a separate batch of envs (fixed seed, so the
         same fire layouts every time), logged as Evaluation/* scalars."""
-        from roshan import report
-        from roshan.evaluate import policy_fn, run_episodes
-
         tc = self.cfg.train
         if self.eval_env is None:
             self.eval_env = make_env(self.cfg, min(tc.eval_envs, tc.eval_episodes), seed=tc.seed + 10_000,
@@ -548,14 +517,14 @@ class Trainer:
 # ------------------------------------------------------------------------------------------------ entry points
 
 
-def start_run(cfg: RunConfig, root: str | Path = "runs", name: str | None = None) -> Path:
+def start_run(cfg: Config, root: str | Path = "runs", name: str | None = None) -> Path:
     """Create the run folder and write the resolved config."""
     run_dir = new_run_dir(root, name or f"{cfg.train.algo}_{time.strftime('%Y%m%d-%H%M%S')}")
     dump_config(cfg, run_dir / "config.yaml")
     return run_dir
 
 
-def resume_state(run_dir: Path, cfg: RunConfig) -> dict | None:
+def resume_state(run_dir: Path, cfg: Config) -> dict | None:
     """The ``latest`` checkpoint of ``run_dir`` after checking it fits ``cfg`` (None if there is none yet)."""
     path = checkpoint_path(run_dir, "latest")
     for stale in path.parent.glob(".*.tmp"):  # a write the killed run did not finish; the old file is whole
@@ -567,7 +536,7 @@ def resume_state(run_dir: Path, cfg: RunConfig) -> dict | None:
     return state
 
 
-def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress_bar: bool = True,
+def train(cfg: Config, run_dir: Path, resume: bool = False, progress_bar: bool = True,
           on_update: Callable[[dict], None] | None = None, evaluate_at_end: bool = True) -> dict:
     """Train one run in ``run_dir`` (continuing from its ``latest`` checkpoint if ``resume``), then evaluate
     its best checkpoint (``best_eval`` if periodic evaluation ran, else ``best_objective``) on episodes other than
@@ -580,7 +549,6 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress_bar: boo
     progress = trainer.run()
     result = {"run_dir": str(run_dir), **progress.state_dict(), "train_episodes": trainer.episodes.episodes}
     if evaluate_at_end:
-        from roshan.evaluate import evaluate_run
 
         summary = evaluate_run(run_dir, episodes=cfg.train.eval_episodes, seed=cfg.train.seed + 20_000,
                                num_envs=cfg.train.eval_envs, progress_bar=progress_bar)
@@ -588,20 +556,18 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress_bar: boo
     return result
 
 
-def ensure_taichi_for(cfg: RunConfig) -> None:
+def ensure_taichi_for(cfg: Config) -> None:
     """Initialise Taichi from ``sim.arch`` / ``sim.threads`` unless the process already did."""
-    from roshan.runtime import current_arch
 
     if current_arch() is None:
         init_taichi(cfg.sim.arch, cfg.sim.threads or None)
     ensure_taichi()
 
 
-def train_auto(cfg: RunConfig, root: str | Path = "runs", name: str | None = None, progress_bar: bool = True,
+def train_auto(cfg: Config, root: str | Path = "runs", name: str | None = None, progress_bar: bool = True,
                evaluate_at_end: bool = True) -> list[dict]:
     """``train.auto_train`` = k independent runs (seeds seed .. seed+k-1) in sequence, each evaluated; one
     run goes straight to ``root/name``, several to ``root/name/seed_<s>``."""
-    from roshan.config import apply_overrides
 
     k = cfg.train.auto_train
     if k == 1:
@@ -619,7 +585,6 @@ def train_auto(cfg: RunConfig, root: str | Path = "runs", name: str | None = Non
 
 def _write_auto_summary(parent: Path, results: list[dict]) -> None:
     """Per-seed success rates and their mean ± std (median), the way the thesis reports FlyAgent experiments."""
-    import json
 
     rates = np.array([r["eval"]["success_rate"] for r in results])
     summary = {"runs": [r["run_dir"] for r in results], "success_rates": rates.tolist(),
@@ -630,7 +595,6 @@ def _write_auto_summary(parent: Path, results: list[dict]) -> None:
 
 def result_lines(res: dict) -> str:
     """A few lines about a finished run for the console."""
-    from roshan import report
 
     mins = res["seconds"] / 60.0
     head = (f"{res['run_dir']}: {res['updates']} updates, {res['env_steps']:,} env steps, {mins:.1f} min "

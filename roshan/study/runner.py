@@ -42,8 +42,8 @@ from optuna.storages._heartbeat import BaseHeartbeat  # the storages' heartbeat 
 from optuna.storages.journal import JournalFileBackend, JournalStorage
 from optuna.trial import FrozenTrial, TrialState
 
-from roshan.config import ConfigError, _suggest, all_keys, from_dict, to_dict
-from roshan.run import RunConfig
+from roshan.config import Config, ConfigError, all_keys, from_dict, load_run_config, suggest, to_dict
+from roshan.runs.train import rollout_steps, start_run, train
 
 OBJECTIVES = {"success": "maximize", "reward": "maximize", "tte": "minimize"}  # learning.md 13
 RECIPE_ATTR = "roshan_recipe"  # study user attribute holding the recipe
@@ -121,7 +121,7 @@ class SearchSpace:
         return {"params": {p.key: p.spec() for p in self.params}, "tie": dict(self.tie)}
 
 
-def load_space(path: str | Path, base: RunConfig) -> SearchSpace:
+def load_space(path: str | Path, base: Config) -> SearchSpace:
     """Read and validate a search-space YAML (see ``configs/spaces/``) against the config ``base``."""
     try:
         data = yaml.safe_load(Path(path).read_text())
@@ -132,7 +132,7 @@ def load_space(path: str | Path, base: RunConfig) -> SearchSpace:
     return parse_space(data, base, where=str(path))
 
 
-def parse_space(data: Any, base: RunConfig, where: str = "search space") -> SearchSpace:
+def parse_space(data: Any, base: Config, where: str = "search space") -> SearchSpace:
     """``{"params": {dotted.key: spec, ...}, "tie": {dotted.key: sampled.key}}`` -> :class:`SearchSpace`.
 
     Raises:
@@ -160,7 +160,7 @@ def parse_space(data: Any, base: RunConfig, where: str = "search space") -> Sear
     return SearchSpace(params, tuple(tie.items()))
 
 
-def _parse_param(key: str, spec: Any, base: RunConfig, where: str) -> Param:
+def _parse_param(key: str, spec: Any, base: Config, where: str) -> Param:
     _check_key(key, where)
     at = f"{where}: {key}"
     if not isinstance(spec, dict) or spec.get("type") not in PARAM_FIELDS:
@@ -214,13 +214,13 @@ def _number(spec: dict, name: str, at: str) -> float:
 
 
 def _check_key(key: str, where: str) -> None:
-    if key in all_keys(RunConfig):
+    if key in all_keys(Config):
         return
-    raise StudyError(f"{where}: unknown key {key!r}{_suggest(str(key), all_keys(RunConfig))}")
+    raise StudyError(f"{where}: unknown key {key!r}{suggest(str(key), all_keys(Config))}")
 
 
 def _leaf_type(key: str) -> type:
-    cls: Any = RunConfig
+    cls: Any = Config
     for part in key.split("."):
         hint = typing.get_type_hints(cls)[part]
         args = [a for a in typing.get_args(hint) if a is not type(None)]
@@ -241,7 +241,7 @@ def _probe_values(p: Param) -> list:
     return [int(p.low), int(p.high)] if p.type == "int" else [p.low, p.high]
 
 
-def _check_values(base: RunConfig, key: str, values: list, at: str) -> None:
+def _check_values(base: Config, key: str, values: list, at: str) -> None:
     """Every bound or choice must be a value the config accepts for ``key``."""
     for v in values:
         try:
@@ -250,7 +250,7 @@ def _check_values(base: RunConfig, key: str, values: list, at: str) -> None:
             raise StudyError(f"{at}: {v!r} is not accepted by the config ({exc})") from None
 
 
-def with_values(cfg: RunConfig, values: dict[str, Any], where: str = "study") -> RunConfig:
+def with_values(cfg: Config, values: dict[str, Any], where: str = "study") -> Config:
     """A validated copy of ``cfg`` with dotted keys set to (already typed) values."""
     data = to_dict(cfg)
     for key, value in values.items():
@@ -269,7 +269,7 @@ def with_values(cfg: RunConfig, values: dict[str, Any], where: str = "study") ->
 class Recipe:
     """What every worker of a study needs, stored in the study itself (so a worker needs only storage + name)."""
 
-    config: dict  # the base RunConfig as a nested dict
+    config: dict  # the base Config as a nested dict
     space: dict  # SearchSpace.to_dict()
     objective: str = "success"  # success (mean evaluation success) | reward (mean episode reward) | tte (minimised)
     trials: int = 100  # trials to finish; a trial retried after its worker died counts once
@@ -279,8 +279,8 @@ class Recipe:
     prune_startup: int = 5  # trials that finish before any is pruned
     prune_warmup: int = 10  # updates of a trial before it can be pruned
 
-    def run_config(self) -> RunConfig:
-        return from_dict(RunConfig, self.config, where="study recipe")
+    def run_config(self) -> Config:
+        return from_dict(Config, self.config, where="study recipe")
 
     def search_space(self) -> SearchSpace:
         return parse_space(self.space, self.run_config(), where="study recipe")
@@ -294,12 +294,8 @@ def make_recipe(config_path: str | Path | None, overrides: list[str] | tuple[str
                 **settings) -> Recipe:
     """Load and validate the base config and the search space; ``settings`` are :class:`Recipe` fields (None =
     default)."""
-    from roshan.run import load_run_config
-
     base = load_run_config(config_path, overrides)
     if base.train.algo == "ppo":  # a base config every trial would fail with is an error now, not N failures later
-        from roshan.train import rollout_steps
-
         rollout_steps(base)
     space = load_space(space_path, base)
     fields = {k: v for k, v in settings.items() if v is not None}
@@ -641,7 +637,7 @@ def objective_value(summary: dict, objective: str) -> float:
 class TrialDisplay:
     """The worker's progress line: trial, updates (or env steps) of the budget, training objective, reward."""
 
-    def __init__(self, number: int, cfg: RunConfig, slot: int, quiet: bool):
+    def __init__(self, number: int, cfg: Config, slot: int, quiet: bool):
         from tqdm import tqdm
 
         tc = cfg.train
@@ -666,8 +662,6 @@ def make_objective(recipe: Recipe, root: str | Path, name: str, slot: int = 0, l
     base, space = recipe.run_config(), recipe.search_space()
 
     def objective(trial: optuna.Trial) -> float:
-        from roshan.train import start_run, train
-
         trial.set_user_attr(WORKER_ATTR, worker_record())
         values = space.sample(trial)
         cfg = with_values(base, {**values, **(local or {}), "train.auto_train": 1}, where=f"trial {trial.number}")
@@ -757,7 +751,7 @@ class Launcher:
         cmd = [sys.executable, "-m", "roshan", "study", "run", "--worker", "--slot", str(slot), "--storage",
                self.storage_url, "--name", self.name, "--root", self.root, *self.worker_args]
         # The workers import this very roshan, installed or not.
-        paths = [str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH", "")]
+        paths = [str(Path(__file__).resolve().parents[2]), os.environ.get("PYTHONPATH", "")]
         return subprocess.Popen(cmd, env={**os.environ, "PYTHONPATH": os.pathsep.join(p for p in paths if p)})
 
     def reap(self) -> None:

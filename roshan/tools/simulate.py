@@ -14,8 +14,11 @@ from pathlib import Path
 
 import numpy as np
 
-from roshan.config import Config, ConfigError, replace, to_dict
+from roshan.config import Config, ConfigError, FlyConfig, replace, to_dict
+from roshan.env.fly import FlyVectorEnv
+from roshan.env.heuristics import POLICIES, policy_actions
 from roshan.kernels.fire import FireSim
+from roshan.kernels.render import FrameRenderer, drone_overlay, write_gif
 from roshan.maps import load_map
 from roshan.runtime import init_taichi
 
@@ -67,8 +70,6 @@ def run_simulation(cfg: Config, steps: int, every: int = 100, frames_dir: Path |
     sim = build_sim(cfg)
     renderer = None
     if frames_dir is not None or gif is not None:
-        from roshan.kernels.render import FrameRenderer
-
         frames_dir = _frames_dir(frames_dir, gif)
         renderer = FrameRenderer(sim)
     result = SimulationResult()
@@ -145,8 +146,6 @@ def run_drone_simulation(cfg: Config, steps: int, drones: int, policy: str = "gr
     (every env has made that many, across episodes). Frames show env 0 with its drones; its episode number
     is in the file name, since env 0 carries on into a new episode whenever one ends.
     """
-    from roshan.env.heuristics import POLICIES
-
     _check_steps(steps, every)
     if isinstance(drones, bool) or not isinstance(drones, int | np.integer) or drones < 1:
         raise ValueError(f"--drones: expected a positive number of drones per env, got {drones!r} "
@@ -161,8 +160,6 @@ def run_drone_simulation(cfg: Config, steps: int, drones: int, policy: str = "gr
     env, fly = _build_fly_env(cfg)
     renderer = overlay = None
     if frames_dir is not None or gif is not None:
-        from roshan.kernels.render import FrameRenderer, drone_overlay
-
         frames_dir = _frames_dir(frames_dir, gif)
         renderer, overlay = FrameRenderer(env.fire), drone_overlay(env.drones, 0)
     result = SimulationResult()
@@ -204,16 +201,12 @@ def run_drone_simulation(cfg: Config, steps: int, drones: int, policy: str = "gr
 
 
 def _build_fly_env(cfg: Config):
-    from roshan.env.fly import FlyConfig, FlyVectorEnv
-
     fly = FlyConfig(policy="complex")
     return FlyVectorEnv(num_envs=cfg.sim.envs, config=cfg, fly=fly, seed=cfg.sim.seed), fly
 
 
 def _fly(env, obs: dict, n: int, policy: str, generator, tally: _EpisodeTally) -> dict:
     """Advance every env ``n`` steps under ``policy``, counting the episodes that end."""
-    from roshan.env.heuristics import policy_actions
-
     for _ in range(n):
         obs, _, _, _, info = env.step(policy_actions(policy, env, obs, generator))
         tally.add(info)
@@ -248,8 +241,6 @@ def _finish_frames(renderer, result: SimulationResult, gif: Path | None) -> None
     if renderer is not None:
         renderer.close()
         if gif is not None:
-            from roshan.kernels.render import write_gif
-
             result.gif = write_gif(result.frames, Path(gif))
 
 

@@ -12,40 +12,19 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
-from roshan import report
+from roshan.runs import report
+from roshan.algos.buffers import ReplayBuffer
+from roshan.algos.frozen import load_agent, policy_fn
 from roshan.algos.networks import flatten_drones
 from roshan.config import apply_overrides
 from roshan.env.fly import FlyVectorEnv
-from roshan.kernels.episode import EPISODE_FIELDS, REASONS
-from roshan.run import config_of_checkpoint, load_checkpoint, resolve_checkpoint
+from roshan.env.heuristics import straight_to_goal
+from roshan.episode import EPISODE_FIELDS, REASONS
+from roshan.kernels.render import write_gif
+from roshan.runs.envs import make_env
 from roshan.runtime import ensure_taichi, torch_device
-
-
-def load_agent(target: str | Path, which: str = "best"):
-    """(config, agent, checkpoint path) of a run folder or a checkpoint file."""
-    from roshan.train import make_agent
-
-    path = resolve_checkpoint(target, which)
-    state = load_checkpoint(path)
-    cfg = config_of_checkpoint(state, str(path))
-    ensure_taichi()
-    agent = make_agent(cfg, torch_device())
-    agent.load_state_dict(state["agent"], weights_only=True)
-    return cfg, agent, path
-
-
-def policy_fn(agent):
-    """Deterministic actions from a batch of observations, whatever the algorithm: (B, 2) from flattened drone
-    observations for FlyAgents, (E, N) candidate indices for the planner."""
-    from roshan.algos.planner import PlannerPPO
-    from roshan.algos.ppo import PPO
-
-    if isinstance(agent, PlannerPPO):
-        return lambda obs: agent.act(obs, deterministic=True)[0]
-    if isinstance(agent, PPO):
-        return agent.act_mode
-    return lambda obs: agent.act(obs)
 
 
 @torch.no_grad()
@@ -62,8 +41,6 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
     done_count = torch.zeros(E, dtype=torch.long)
     rows: list[list] = [[] for _ in range(E)]
     frame = 0
-    from tqdm import tqdm
-
     bar = tqdm(total=quota * E, unit="episode", disable=not progress_bar, desc="eval")
     flat = not getattr(env, "is_planner", False)  # FlyAgent policies see drones as a batch
     while int(done_count.min()) < quota:
@@ -104,8 +81,6 @@ BASELINES = ("random", "greedy")
 def baseline_fn(name: str, num_envs: int, num_drones: int, seed: int):
     """Scripted actions on flattened drone observations: ``random`` (uniform, seeded) or ``greedy`` (straight to
     the goal, roshan.env.heuristics)."""
-    from roshan.env.heuristics import straight_to_goal
-
     if name not in BASELINES:
         raise ValueError(f"--baseline: expected one of {', '.join(BASELINES)}, got {name!r}")
 
@@ -159,9 +134,8 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
     With ``baseline`` (random | greedy) the scripted policy runs on the same episodes (same seed: same fire
     layouts and wind) and its summary is returned under ``"baseline"``.
     Returns the summary dict of :func:`roshan.report.summarize` plus ``checkpoint`` and ``out_dir``."""
-    from roshan.train import make_env
-
-    cfg, agent, path = load_agent(target, which)
+    ensure_taichi()
+    cfg, agent, path = load_agent(target, which, torch_device())
     cfg = apply_overrides(cfg, overrides) if overrides else cfg
     E = max(1, min(num_envs or cfg.train.eval_envs, episodes))
     env = make_env(cfg, E, seed, evaluation=True)
@@ -202,8 +176,6 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         Path(json_path).parent.mkdir(parents=True, exist_ok=True)
         Path(json_path).write_text(json.dumps(payload, indent=2) + "\n")
     if gif_path is not None:
-        from roshan.kernels.render import write_gif
-
         write_gif(sorted(Path(frames_dir).glob("frame_*.png")), Path(gif_path))
     if scratch is not None:
         scratch.cleanup()
@@ -218,14 +190,11 @@ def save_buffer(target: str | Path, transitions: int, path: Path, seed: int = 0,
     """Record ``transitions`` (drone transitions) of the deterministic policy into a replay buffer file (the IQL
     dataset of learning.md 8: raw rewards, per-drone not_done, next observations; the env's ``final_obs`` is
     the next observation where an episode ended, and only a real terminal sets not_done = 0)."""
-    from tqdm import tqdm
-
-    from roshan.algos.buffers import ReplayBuffer
-
-    cfg, agent, _ = load_agent(target, which)
+    ensure_taichi()
+    cfg, agent, _ = load_agent(target, which, torch_device())
     cfg = apply_overrides(cfg, overrides) if overrides else cfg
     E = num_envs or cfg.train.eval_envs
-    env = FlyVectorEnv(num_envs=E, config=cfg.env_config(), fly=cfg.fly, seed=seed)
+    env = FlyVectorEnv(num_envs=E, config=cfg, fly=cfg.fly, seed=seed)
     N = env.num_drones
     obs, _ = env.reset(seed=seed)
     shapes = {k: tuple(v.shape[2:]) for k, v in obs.items()}

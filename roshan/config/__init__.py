@@ -1,0 +1,96 @@
+"""ONE typed config tree: every section a run, an env, a simulation or a study reads, with YAML loading,
+``--set`` overrides and validation (:mod:`roshan.config.schema`).
+
+The sections live by subject: :mod:`roshan.config.sim` (map, fire, wind, ignition, drones, batch),
+:mod:`roshan.config.agents` (the FlyAgent task, the planner level, rewards) and :mod:`roshan.config.learning`
+(training loop and algorithms). :class:`Config` is the root; every layer takes it (or one of its sections).
+"""
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from roshan.config import schema
+from roshan.config.agents import (
+    CONTROLLERS,
+    PLANNER_NEWEST_TERMS,
+    PLANNER_PRESETS,
+    PRESETS,
+    FlyConfig,
+    PlannerConfig,
+    PlannerRewardConfig,
+    RewardConfig,
+)
+from roshan.config.learning import (
+    IQLConfig,
+    OptimConfig,
+    PlannerPPOConfig,
+    PPOConfig,
+    RNDConfig,
+    TD3Config,
+    TrainConfig,
+)
+from roshan.config.schema import (
+    ConfigError,
+    apply_overrides,
+    choice,
+    dump_config,
+    from_dict,
+    num,
+    replace,
+    suggest,
+    to_dict,
+)
+from roshan.config.sim import (
+    ConvectionConfig,
+    DroneConfig,
+    FireConfig,
+    IgnitionConfig,
+    MapConfig,
+    RadiationConfig,
+    SimConfig,
+    WindConfig,
+)
+
+
+@dataclass(frozen=True)
+class Config:
+    """Everything: the simulator, the agents' tasks, the training loop and each algorithm's hyperparameters."""
+
+    map: MapConfig = field(default_factory=MapConfig)
+    fire: FireConfig = field(default_factory=FireConfig)
+    wind: WindConfig = field(default_factory=WindConfig)
+    ignition: IgnitionConfig = field(default_factory=IgnitionConfig)
+    drones: DroneConfig = field(default_factory=DroneConfig)
+    sim: SimConfig = field(default_factory=SimConfig)
+    fly: FlyConfig = field(default_factory=FlyConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+    td3: TD3Config = field(default_factory=TD3Config)
+    iql: IQLConfig = field(default_factory=IQLConfig)
+    rnd: RNDConfig = field(default_factory=RNDConfig)
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    planner_ppo: PlannerPPOConfig = field(default_factory=PlannerPPOConfig)
+
+
+def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = (), cls: type = Config):
+    """A YAML config (or the defaults) plus ``section.key=value`` overrides, validated (errors name the file and
+    key); ``cls`` is the root :class:`Config` unless a caller loads one section on its own."""
+    return schema.load_config(path, overrides, cls=cls)
+
+
+def all_keys(cls: type = Config, prefix: str = "") -> list[str]:
+    """Every dotted key of the tree (or of one section class)."""
+    return schema.all_keys(cls, prefix)
+
+
+load_run_config = load_config
+
+
+__all__ = [
+    "CONTROLLERS", "PLANNER_NEWEST_TERMS", "PLANNER_PRESETS", "PRESETS", "Config", "ConfigError",
+    "ConvectionConfig", "DroneConfig", "FireConfig", "FlyConfig", "IQLConfig", "IgnitionConfig", "MapConfig",
+    "OptimConfig", "PPOConfig", "PlannerConfig", "PlannerPPOConfig", "PlannerRewardConfig", "RNDConfig",
+    "RadiationConfig", "RewardConfig", "SimConfig", "TD3Config", "TrainConfig", "WindConfig", "all_keys",
+    "apply_overrides", "choice", "dump_config", "from_dict", "load_config", "load_run_config", "num", "replace",
+    "suggest", "to_dict",
+]

@@ -1,0 +1,108 @@
+"""The agents' sections: the FlyAgent task, the planner level and the reward coefficients of both.
+
+Reward presets are data (thesis Tables 5.3-5.5, 5.7, 5.9); the ``ti.func``s that pay them live in
+:mod:`roshan.kernels.rewards`.
+"""
+
+from dataclasses import dataclass, field
+
+from roshan.config.schema import choice, num
+
+# Thesis Table 5.3 (defaults), Table 5.4 (best single Optuna trial), Table 5.5 (mean of the top-10 trials).
+PRESETS: dict[str, dict[str, float]] = {
+    "thesis": {"goal": 1.0, "boundary": -1.0, "extinguish": 0.01, "timeout": -1.0, "collision": -1.0,
+               "progress": 0.1, "proximity": -0.05},
+    "optuna_best": {"goal": 0.230, "boundary": -4.737, "extinguish": 0.0128, "timeout": -3.050,
+                    "collision": -4.737, "progress": 0.278, "proximity": -0.189},
+    "optuna_top10": {"goal": 0.8785929835, "boundary": -4.3280085652, "extinguish": 0.0072352109,
+                     "timeout": -3.7322366112, "collision": -4.3280085652, "progress": 0.2955909834,
+                     "proximity": -0.1150000819},
+}
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    """A preset of coefficients; any field set here overrides the preset's value."""
+
+    preset: str = choice("thesis", tuple(PRESETS))
+    goal: float | None = None  # GoalReached
+    boundary: float | None = None  # BoundaryTerminal
+    extinguish: float | None = None  # Extinguish (complex policy)
+    timeout: float | None = None  # TimeOut
+    collision: float | None = None  # Collision (collision mode)
+    progress: float | None = num(None, 0.0, doc="DistanceImprovement per grid unit of progress")
+    proximity: float | None = None  # ProximityPenalty (collision mode)
+
+
+@dataclass(frozen=True)
+class FlyConfig:
+    """The FlyAgent task (agents.md 5-9)."""
+
+    policy: str = choice("simple", ("simple", "complex"))  # simple: reach the goal; complex: put every fire out
+    collision: bool = False  # collisions terminate (and the collision reward terms apply)
+    time_limit: str = choice("newest", ("newest", "thesis"))  # T_max formulas of agents.md 5
+    k_turn: float = num(1.5, 0.0, lo_open=True, doc="detour factor of T_phys")
+    fire_goal_percentage: float = num(1.0, 0.0, 1.0, doc="chance an initial goal is a fire (else a corner)")
+    frames: int = num(3, 1, 8, doc="stacked observation frames (index 0 = newest)")
+    sticky_extinguish: bool = False  # True reproduces the original's sticky Extinguish reward flag (agents.md 7.1)
+    frame_skips: int = num(1, 1, 16, doc="physics steps per action; only the last one's reward is returned")
+    rewards: RewardConfig = field(default_factory=RewardConfig)
+
+
+# agents.md 13.5: thesis Table 5.7 (best Optuna trial, P1 "Default") and Table 5.9 (mean of the top-10 trials,
+# the thesis-era and newest configs). The newest code's extra terms have one default set.
+PLANNER_PRESETS: dict[str, dict[str, float]] = {
+    "optuna_best": {"goal": 4.656, "burned": -0.886, "ground": -0.236, "timeout": -0.435, "same": -1.913,
+                    "extinguish": 0.523, "fast": 0.523},
+    "optuna_top10": {"goal": 3.9105863581302542, "burned": -2.1999479401238373, "ground": -0.29328248592328265,
+                     "timeout": -2.3843039593546047, "same": -1.552461776799054, "extinguish": 0.6054212968617818,
+                     "fast": 0.21654104693212245},
+}
+PLANNER_NEWEST_TERMS = {"distance": 0.1, "spread": 0.05, "refill": 0.5, "empty": -0.05}
+
+
+@dataclass(frozen=True)
+class PlannerRewardConfig:
+    """Planner reward: a preset of the thesis terms (any field set here overrides it); ``version = newest`` adds
+    DistanceProgress, SpreadPrevention (and with the water limit WaterRefill, EmptyTank) and makes the
+    groundstation and same-goal terms per drone as in the newest code."""
+
+    preset: str = choice("optuna_top10", tuple(PLANNER_PRESETS))
+    version: str = choice("thesis", ("thesis", "newest"))
+    goal: float | None = None  # GoalReached
+    burned: float | None = None  # MapBurnedTooMuch
+    ground: float | None = None  # FlyingTowardsGroundStation
+    timeout: float | None = None  # TimeOut
+    same: float | None = None  # SameGoalPenalty
+    extinguish: float | None = None  # ExtinguishFires, per cell
+    fast: float | None = None  # FastExtinguish, times the remaining fraction of the step limit
+    distance: float | None = None  # DistanceProgress (newest)
+    spread: float | None = None  # SpreadPrevention (newest)
+    refill: float | None = None  # WaterRefill (newest, water limit)
+    empty: float | None = None  # EmptyTank (newest, water limit)
+
+
+CONTROLLERS = ("planner", "greedy")  # who picks the planner drones' goals
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """The planner level (agents.md 11, 13): timing, explorers, low-level policies, candidates, rewards."""
+
+    interval: int = num(5, 1, 100, doc="hierarchy_timesteps: low-level steps per planner decision")
+    fly_model: str = "models/fly_collision"  # frozen FlyAgent run folder or checkpoint for the planner drones
+    explorer_model: str = "models/fly_simple"  # frozen FlyAgent for the explorers
+    num_explorers: int = num(12, 1, 64, doc="ExploreFlyAgents (thesis 12; the root configs say 3)")
+    explorer_speed: float = num(20.0, 0.0, lo_open=True, doc="explorer max speed (m/s)")
+    explorer_view_range: int = num(20, 2, doc="explorer view range (cells); also the meander spacing")
+    meander: str = choice("newest", ("newest", "thesis"))
+    explorer_index_bound: str = choice("longest", ("first", "longest"),
+                                       doc="longest: every explorer flies its whole path, so every cell is seen; "
+                                           "first: the reference (explorer 0's path bounds the shared index)")
+    train_fires: str = choice("true", ("true", "detected"), doc="candidates in training: all burning cells "
+                                                                "(centralised) or the fire map")
+    eval_fires: str = choice("detected", ("true", "detected"), doc="candidates in evaluation")
+    time_limit: str = choice("newest", ("newest", "thesis"))  # T_max formulas of agents.md 5
+    burnout: float = num(0.30, 0.0, 1.0, doc="burned-out fraction that fails the episode")
+    max_candidates: int = num(0, 0, doc="candidate list length K (groundstation included); 0 = every cell + 1")
+    rewards: PlannerRewardConfig = field(default_factory=PlannerRewardConfig)

@@ -1,0 +1,98 @@
+"""The simulator's sections: map, fire physics, wind, initial fires, drones, batch and arch."""
+
+from dataclasses import dataclass, field
+
+from roshan.config.schema import choice, num
+
+
+@dataclass(frozen=True)
+class ConvectionConfig:
+    """Convection particles: Langevin SDE for hot gas / embers (firespin.md 7.1)."""
+
+    enabled: bool = True  # emit_convective
+    y_st: float = num(1.0, 0.0, lo_open=True, doc="initial intensity")
+    y_lim: float = num(0.2, 0.0, lo_open=True, doc="intensity below which a particle dies")
+    fl: float = num(0.15, 0.0, doc="position scaling factor F_l")
+    c0: float = num(1.98, 0.0, doc="Kolmogorov-like constant C_0")
+    tau_mem: float = num(10.0, 0.0, lo_open=True, doc="intensity decay time (s)")
+    lt: float = num(80.0, 0.0, lo_open=True, doc="integral length scale L_t (m)")
+
+
+@dataclass(frozen=True)
+class RadiationConfig:
+    """Radiation particles: random walk on a slowly growing circle (firespin.md 7.2)."""
+
+    enabled: bool = True  # emit_radiation
+    y_st: float = num(1.0, 0.0, lo_open=True, doc="initial intensity")
+    y_lim: float = num(0.165, 0.0, lo_open=True, doc="intensity below which a particle dies")
+
+
+@dataclass(frozen=True)
+class FireConfig:
+    """The FireSPIN cellular automaton (firespin.md 1-8)."""
+
+    dt: float = num(0.1, 0.0, 10.0, lo_open=True, doc="time step (s)")
+    flood_duration: float = num(5.0, 0.0, doc="how long a flooded cell stays flooded (s)")
+    uniform_ignition_time: float = num(100.0, 0.0, lo_open=True, doc="tau_ign on the uniform map (s)")
+    uniform_burning_time: float = num(120.0, 0.0, lo_open=True, doc="tau_burn on the uniform map (s)")
+    convection: ConvectionConfig = field(default_factory=ConvectionConfig)
+    radiation: RadiationConfig = field(default_factory=RadiationConfig)
+    conv_capacity: int = num(0, 0, doc="convection particles per env; 0 = auto from the map size")
+    rad_capacity: int = num(0, 0, doc="radiation particles per env; 0 = auto from the map size")
+
+
+@dataclass(frozen=True)
+class WindConfig:
+    """Constant wind per episode (firespin.md 6)."""
+
+    speed: float = num(10.0, 0.0, 100.0, doc="10-m wind speed U_w (m/s)")
+    direction: float = num(-1.0, -1.0, 360.0, hi_open=True,
+                           doc="degrees from the row axis (south) towards the column axis (east); -1 = random")
+    turbulence: float = num(0.314, 0.0, doc="turbulence ratio a (u' = a * U_w)")
+
+
+@dataclass(frozen=True)
+class IgnitionConfig:
+    """The initial fire generator (firespin.md 11, newest code)."""
+
+    fire_percentage: float = num(0.015, 0.0, 1.0, doc="fraction of all cells to ignite")
+    clusters: int = num(2, 1, doc="number of clusters (or rings)")
+    spread_prob: float = num(0.5, 0.0, 1.0, doc="base probability that a cluster grows into a neighbour")
+    noise: float = num(1.0, 0.0, 2.0, doc="amplitude of the perturbation of spread_prob")
+    pattern: str = choice("cluster", ("cluster", "scattered", "ring", "random"))
+
+
+@dataclass(frozen=True)
+class DroneConfig:
+    """FlyAgent drones (agents.md 1, 3, 4, 14): physics, sensing, start layout and water."""
+
+    num_drones: int = num(4, 1, 64, doc="drones per env")
+    max_speed: float = num(10.0, 0.0, lo_open=True, doc="v_max per axis (m/s)")
+    view_range: int = num(10, 2, doc="view range (cells)")
+    drone_size: float = num(2.0, 0.0, lo_open=True, doc="drone radius used by the collision test (m)")
+    use_vel_bins: bool = True  # actions rounded to 41 levels (steps of 0.05)
+    use_velocity_change: bool = False  # acceleration mode: v += a * (v_max / 2) * dt
+    groundstation_start_percentage: float = num(1.0, 0.0, 1.0, doc="chance a drone starts at the groundstation")
+    use_water_limit: bool = False  # finite tank, newest code (agents.md 14); off in the thesis experiments
+    water_capacity: float = num(4.0, 0.0, lo_open=True, doc="tank size in drops (one drop puts out one cell)")
+    recharge_time: float = num(2.0, 0.0, doc="seconds an empty tank takes to refill at the groundstation")
+
+
+@dataclass(frozen=True)
+class MapConfig:
+    """Which land-cover map to simulate."""
+
+    name: str = "35x36_Woods"  # bundled map name, "uniform", or a path to a CLC+ GeoTIFF
+    band: int = num(0, 0, doc="raster band (1-based) for multi-band files; 0 = the only band")
+    uniform_rows: int = num(50, 1, doc="rows of the uniform map")
+    uniform_cols: int = num(50, 1, doc="columns of the uniform map")
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Batch size, seed and where the kernels run."""
+
+    envs: int = num(1, 1, doc="environments advanced together")
+    seed: int = num(0, 0, 2**31 - 1, doc="seed of every random stream")
+    arch: str = choice("cpu", ("cpu", "cuda", "vulkan", "auto"))
+    threads: int = num(0, 0, doc="CPU threads; 0 = all cores")
