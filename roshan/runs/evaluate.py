@@ -14,7 +14,6 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from roshan.runs import report
 from roshan.algos.buffers import ReplayBuffer
 from roshan.algos.frozen import load_agent, policy_fn
 from roshan.algos.networks import flatten_drones
@@ -23,6 +22,7 @@ from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import straight_to_goal
 from roshan.episode import EPISODE_FIELDS, REASONS
 from roshan.kernels.render import write_gif
+from roshan.runs import report
 from roshan.runs.envs import make_env
 from roshan.runtime import ensure_taichi, torch_device
 

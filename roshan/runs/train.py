@@ -24,7 +24,7 @@ from roshan.algos.buffers import ReplayBuffer
 from roshan.algos.frozen import policy_fn
 from roshan.algos.networks import flatten_drones
 from roshan.algos.planner import PlannerRollout
-from roshan.algos.ppo import FrameCache, PPO, Rollout
+from roshan.algos.ppo import PPO, FrameCache, Rollout
 from roshan.checkpoints import (
     check_same_model,
     checkpoint_path,
@@ -42,7 +42,6 @@ from roshan.runs import report
 from roshan.runs.envs import make_env
 from roshan.runs.evaluate import evaluate_run, run_episodes
 from roshan.runtime import current_arch, ensure_taichi, init_taichi, torch_device
-
 
 # ------------------------------------------------------------------------------------------------ episodes
 
