@@ -213,7 +213,7 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, frames_dir
     run, --baseline greedy plays the heuristic controller on the same episodes (same seed and envs).
     """
     from roshan.runs import evaluate as ev
-    from roshan.runs import report
+    from roshan.runs.report.tables import format_comparison, format_table
     from roshan.runtime import init_taichi
 
     try:
@@ -233,9 +233,9 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, frames_dir
         _fail(exc)
     title = f"{target} ({Path(summary['checkpoint']).stem}, seed {seed})"
     if baseline is not None:
-        click.echo(report.format_comparison({"policy": summary, baseline: summary["baseline"]}, title))
+        click.echo(format_comparison({"policy": summary, baseline: summary["baseline"]}, title))
     else:
-        click.echo(report.format_table(summary, title))
+        click.echo(format_table(summary, title))
     click.echo(f"files: {summary['out_dir']}")
 
 

@@ -41,7 +41,7 @@ process holds at most one: renderers of the same size share it, and a renderer o
 import math
 import sys
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -521,26 +521,3 @@ def ggui_available() -> bool:
         return True
     except Exception:  # any failure to open a window means no usable GGUI here
         return False
-
-
-# ---------------------------------------------------------------------------------------------- GIF
-
-
-def write_gif(frames: Sequence[Path | str | np.ndarray], out: Path | str, fps: int = 10) -> Path:
-    """Write frames (PNG paths or (H, W, 3) uint8 arrays) as a GIF that loops forever; returns ``out``."""
-    if not frames:
-        raise ValueError("write_gif needs at least one frame")
-    if fps < 1:
-        raise ValueError(f"fps must be >= 1, got {fps}")
-    images = []
-    for f in frames:
-        if isinstance(f, np.ndarray):
-            images.append(Image.fromarray(np.asarray(f, np.uint8)).convert("RGB"))
-        else:
-            with Image.open(f) as im:
-                images.append(im.convert("RGB"))
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    # Pillow merges identical consecutive frames into one longer frame; the GIF's total duration is kept.
-    images[0].save(out, save_all=True, append_images=images[1:], duration=max(1, round(1000 / fps)), loop=0)
-    return out

@@ -31,7 +31,7 @@ def local_values(arch: str | None, threads: int | None) -> dict[str, Any]:
 
 
 def objective_value(summary: dict, objective: str) -> float:
-    """The trial's value from an evaluation summary (roshan.report.summarize)."""
+    """The trial's value from an evaluation summary (roshan.runs.report.stats.summarize)."""
     if objective == "success":
         return float(summary["success_rate"])
     stats = summary["reward" if objective == "reward" else "tte"]

@@ -8,10 +8,11 @@ import taichi as ti
 from PIL import Image
 
 from roshan.config import IgnitionConfig
+from roshan.io import write_gif
 from roshan.kernels import particles as pt
 from roshan.kernels import render
 from roshan.kernels.fire import N_CONV, N_RAD, FireSim
-from roshan.kernels.render import FrameRenderer, cell_colours, default_cell_px, write_gif
+from roshan.kernels.render import FrameRenderer, cell_colours, default_cell_px
 from roshan.maps import BURNED, BURNING, CLASSES, FLOODED, load_map
 from roshan.runtime import init_taichi
 
