@@ -33,9 +33,8 @@ Backends only differ in how the finished field leaves Taichi:
   faster than GGUI's RGBA ``window.save_image``).
 - ``auto``: ``ggui`` if an offscreen window opens, else ``raster`` with one warning.
 
-Taichi 1.7 crashes (at ``destroy`` or at interpreter exit) when two GGUI windows are alive at once, so the
-process holds at most one: renderers of the same size share it, and a renderer of another size replaces it
-(about 0.2 s to open).
+The offscreen GGUI window is the process's one shared window of :mod:`roshan.ggui`: renderers of the same size
+share it, and a renderer of another size replaces it.
 """
 
 import math
@@ -47,8 +46,8 @@ from pathlib import Path
 import numpy as np
 import taichi as ti
 from PIL import Image
-from taichi.lang import impl
 
+from roshan.ggui import acquire_window, release_window
 from roshan.kernels.fire import C_STATE, N_CONV, N_RAD
 from roshan.kernels.particles import P_X1, P_X2, P_Y, R_Y, radiation_position
 from roshan.maps import BURNED, CLASSES, FLOODED
@@ -60,7 +59,6 @@ MIN_RADIUS_PX = 0.75  # > sqrt(2)/2: some pixel centre always lies inside the pa
 BURNED_WEIGHT, FLOODED_WEIGHT = 20, 40  # state colour : original class colour (firespin.md 13)
 ARROW_BACKDROP = (21, 19, 51)  # the reference's background colour, behind the wind arrow
 ARROW_BACKDROP_ALPHA = 0.65
-WINDOW_TITLE = "ROSHAN-Taichi"
 NO_GGUI_HINT = ("GGUI/Vulkan is unavailable, so frames are rendered with the raster fallback (numpy/PIL). "
                 "For GGUI install a Vulkan driver, e.g. `apt-get install -y mesa-vulkan-drivers` (Debian).")
 
@@ -174,7 +172,7 @@ class FrameRenderer:
         """The offscreen ``ti.ui.Window`` this renderer draws into, or ``None`` on the raster backend."""
         if self.backend == "ggui":
             try:
-                self._window = _acquire_window((self.width, self.height), self._window)
+                self._window = acquire_window((self.width, self.height), self._window)
             except Exception as err:  # say what to do instead of Taichi's bare "Vulkan must be available"
                 raise RuntimeError(f"backend='ggui': GGUI/Vulkan is unavailable ({err}). Install a Vulkan "
                                    "driver (`apt-get install -y mesa-vulkan-drivers` on Debian) or use "
@@ -226,7 +224,7 @@ class FrameRenderer:
     def close(self) -> None:
         """Give up this renderer's claim on the shared GGUI window (destroyed once no renderer uses it)."""
         if self._window is not None:
-            _release_window()
+            release_window()
             self._window = None
 
     # ------------------------------------------------------------------------------------------ backends
@@ -234,7 +232,7 @@ class FrameRenderer:
     def _resolve_auto(self) -> None:
         global _warned_no_ggui
         try:
-            self._window = _acquire_window((self.width, self.height), None)
+            self._window = acquire_window((self.width, self.height), None)
             self._backend = "ggui"
         except Exception:  # any failure to open an offscreen window means no usable GGUI here
             self._backend = "raster"
@@ -435,27 +433,6 @@ def drone_overlay(drones, env: int = 0) -> DroneOverlay:
     return DroneOverlay(drones, env)
 
 
-class EnvZeroFrames:
-    """``render()`` of the vector envs: env 0's land cover, fire and drones through the raster backend, built on
-    the first call (rendering is optional, and the renderer compiles kernels)."""
-
-    def __init__(self, drones):
-        self.drones = drones
-        self._renderer: FrameRenderer | None = None
-        self._overlay: DroneOverlay | None = None
-
-    def render(self) -> np.ndarray:
-        if self._renderer is None:
-            self._renderer = FrameRenderer(self.drones.fire, backend="raster")
-            self._overlay = drone_overlay(self.drones)
-        return self._renderer.render(overlay=self._overlay)
-
-    def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-
-
 def _arrow_geometry(height: int, width: int) -> tuple[float, float, float] | None:
     """(centre row, centre column, radius) of the wind arrow's disc in the top-right corner; None if too small."""
     radius = min(28.0, max(6.0, 0.05 * min(height, width)))
@@ -473,51 +450,5 @@ def _user_stacklevel() -> int:
     return level
 
 
-# ---------------------------------------------------------------------------------------------- GGUI window
-
-# The runtime is kept (not its id) so a re-initialised Taichi can never look like the one the window belongs to.
-_shared: dict[str, object] = {"window": None, "res": None, "runtime": None, "users": 0}
+# The auto backend warns once per process when it falls back to raster.
 _warned_no_ggui = False
-
-
-def _open_window(res: tuple[int, int]):
-    """A new offscreen GGUI window of ``res = (width, height)``; raises if GGUI/Vulkan is unavailable."""
-    window = ti.ui.Window(WINDOW_TITLE, res, show_window=False)
-    _shared.update(window=window, res=tuple(res), runtime=impl.get_runtime())
-    return window
-
-
-def _close_window() -> None:
-    if _shared["window"] is not None:
-        _shared["window"].destroy()
-    _shared.update(window=None, res=None, runtime=None)
-
-
-def _acquire_window(res: tuple[int, int], held):
-    """The process's one GGUI window, sized ``res``; ``held`` is the window the caller already counts as a user of.
-
-    Replaces the window when the size differs or when Taichi was re-initialised since it was opened.
-    """
-    if _shared["res"] != tuple(res) or _shared["runtime"] is not impl.get_runtime():
-        _close_window()
-        _open_window(res)
-    if held is None:
-        _shared["users"] += 1
-    return _shared["window"]
-
-
-def _release_window() -> None:
-    _shared["users"] = max(0, _shared["users"] - 1)
-    if _shared["users"] == 0:
-        _close_window()
-
-
-def ggui_available() -> bool:
-    """Whether an offscreen GGUI window can be opened in this process (opens the shared window if none is open)."""
-    if _shared["window"] is not None:
-        return True
-    try:
-        _open_window((16, 16))
-        return True
-    except Exception:  # any failure to open a window means no usable GGUI here
-        return False
