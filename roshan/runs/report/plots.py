@@ -14,6 +14,7 @@ from roshan.io import write_atomic
 from roshan.runs.report.episodes import ALWAYS_REPORTED, IF_PRESENT, LABELS, outcome_categories, validate_episodes
 from roshan.runs.report.stats import wilson_interval
 
+_TTE_LABEL = "time to end (steps)"
 _COLORS = {"success": "tab:green", "collision": "tab:red", "boundary": "tab:orange", "timeout": "tab:gray",
            "burnout": "tab:brown", "unspecified": "tab:purple"}
 
@@ -32,6 +33,26 @@ def _save(fig, path: Path) -> Path:
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
     return write_atomic(path, buf.getvalue())
+
+
+def _finish(ax, path: Path, title: str, ylabel: str, xlabel: str | None = None, ylim: tuple | None = None,
+            legend: bool = False) -> Path:
+    """What every plot ends with: axis labels, y range, legend and title, then the PNG of the axes' figure."""
+    if xlabel is not None:
+        ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if ylim is not None:
+        ax.set_ylim(*ylim)
+    if legend:
+        ax.legend()
+    ax.set_title(title)
+    return _save(ax.figure, path)
+
+
+def _finish_ecdf(ax, path: Path) -> Path:
+    """The finish of the time-to-end ECDFs, of one run and of a comparison alike."""
+    return _finish(ax, path, "Time to end, ECDF", "fraction of episodes", xlabel=_TTE_LABEL, ylim=(0, 1.02),
+                   legend=True)
 
 
 def _ecdf(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -54,9 +75,7 @@ def _plot_outcome_bar(ep: dict, path: Path) -> Path:
     ax = fig.add_subplot()
     bars = ax.bar([LABELS[c] for c in cats], counts, color=[_COLORS[c] for c in cats])
     ax.bar_label(bars)
-    ax.set_ylabel("episodes")
-    ax.set_title(f"Episode outcomes (n = {outcome.size})")
-    return _save(fig, path)
+    return _finish(ax, path, f"Episode outcomes (n = {outcome.size})", "episodes")
 
 
 def _plot_tte_hist(ep: dict, path: Path) -> Path:
@@ -66,11 +85,7 @@ def _plot_tte_hist(ep: dict, path: Path) -> Path:
     ax = fig.add_subplot()
     ax.hist([ep["time"][is_success], ep["time"][~is_success]], bins=bins, stacked=True,
             color=[_COLORS["success"], _COLORS["collision"]], label=["Success", "Failure"])
-    ax.set_xlabel("time to end (steps)")
-    ax.set_ylabel("episodes")
-    ax.legend()
-    ax.set_title("Time to end")
-    return _save(fig, path)
+    return _finish(ax, path, "Time to end", "episodes", xlabel=_TTE_LABEL, legend=True)
 
 
 def _plot_tte_ecdf(ep: dict, path: Path) -> Path:
@@ -81,12 +96,7 @@ def _plot_tte_ecdf(ep: dict, path: Path) -> Path:
                               ("Failure", ~is_success, _COLORS["collision"])):
         if mask.any():
             ax.step(*_ecdf(ep["time"][mask]), where="post", color=color, label=f"{name} (n = {int(mask.sum())})")
-    ax.set_xlabel("time to end (steps)")
-    ax.set_ylabel("fraction of episodes")
-    ax.set_ylim(0, 1.02)
-    ax.legend()
-    ax.set_title("Time to end, ECDF")
-    return _save(fig, path)
+    return _finish_ecdf(ax, path)
 
 
 def _plot_reward_vs_episode(ep: dict, path: Path) -> Path:
@@ -100,11 +110,7 @@ def _plot_reward_vs_episode(ep: dict, path: Path) -> Path:
     ax.scatter(x[is_success], ep["reward"][is_success], s=12, color=_COLORS["success"], label="Success")
     ax.scatter(x[~is_success], ep["reward"][~is_success], s=12, color=_COLORS["collision"], label="Failure")
     ax.plot(x[window - 1:], running, color="black", label=f"running mean ({window})")
-    ax.set_xlabel("episode")
-    ax.set_ylabel("episode reward")
-    ax.legend()
-    ax.set_title("Reward per episode")
-    return _save(fig, path)
+    return _finish(ax, path, "Reward per episode", "episode reward", xlabel="episode", legend=True)
 
 
 def _plot_success_bar(ep: dict, path: Path) -> Path:
@@ -114,10 +120,7 @@ def _plot_success_bar(ep: dict, path: Path) -> Path:
     fig = _new_figure(3.2, 4.0)
     ax = fig.add_subplot()
     ax.bar(["Success"], [rate], yerr=[[rate - lo], [hi - rate]], capsize=8, color=_COLORS["success"])
-    ax.set_ylim(0, 1)
-    ax.set_ylabel("success rate (Wilson 95 % CI)")
-    ax.set_title(f"{100 * rate:.1f} % of {n}")
-    return _save(fig, path)
+    return _finish(ax, path, f"{100 * rate:.1f} % of {n}", "success rate (Wilson 95 % CI)", ylim=(0, 1))
 
 
 def _plot_reward_vs_time(ep: dict, path: Path) -> Path:
@@ -128,11 +131,7 @@ def _plot_reward_vs_time(ep: dict, path: Path) -> Path:
         mask = outcome == cat
         if mask.any():
             ax.scatter(ep["time"][mask], ep["reward"][mask], s=12, color=_COLORS[cat], label=LABELS[cat])
-    ax.set_xlabel("time to end (steps)")
-    ax.set_ylabel("episode reward")
-    ax.legend()
-    ax.set_title("Reward against time to end")
-    return _save(fig, path)
+    return _finish(ax, path, "Reward against time to end", "episode reward", xlabel=_TTE_LABEL, legend=True)
 
 
 def _plot_success_vs_time(ep: dict, path: Path) -> Path:
@@ -145,11 +144,8 @@ def _plot_success_vs_time(ep: dict, path: Path) -> Path:
     fig = _new_figure()
     ax = fig.add_subplot()
     ax.bar(edges[:-1], rate, width=np.diff(edges), align="edge", color=_COLORS["success"], edgecolor="white")
-    ax.set_ylim(0, 1)
-    ax.set_xlabel("time to end (steps)")
-    ax.set_ylabel("success rate in bin")
-    ax.set_title("Success against time to end")
-    return _save(fig, path)
+    return _finish(ax, path, "Success against time to end", "success rate in bin", xlabel=_TTE_LABEL,
+                   ylim=(0, 1))
 
 
 _EPISODE_PLOTS = {"failure_reasons_bar.png": _plot_outcome_bar, "time_to_end_hist.png": _plot_tte_hist,
@@ -205,11 +201,7 @@ def _plot_comparison_outcomes(eps: dict[str, dict], path: Path) -> Path:
         ax.bar(np.arange(len(cats)) + (j - (len(eps) - 1) / 2) * width, [np.mean(outcome == c) for c in cats],
                width=width, label=name)
     ax.set_xticks(np.arange(len(cats)), [LABELS[c] for c in cats])
-    ax.set_ylabel("fraction of episodes")
-    ax.set_ylim(0, 1)
-    ax.legend()
-    ax.set_title("Episode outcomes")
-    return _save(fig, path)
+    return _finish(ax, path, "Episode outcomes", "fraction of episodes", ylim=(0, 1), legend=True)
 
 
 def _plot_comparison_ecdf(eps: dict[str, dict], path: Path) -> Path:
@@ -217,12 +209,7 @@ def _plot_comparison_ecdf(eps: dict[str, dict], path: Path) -> Path:
     ax = fig.add_subplot()
     for name, ep in eps.items():
         ax.step(*_ecdf(ep["time"]), where="post", label=f"{name} (n = {ep['time'].size})")
-    ax.set_xlabel("time to end (steps)")
-    ax.set_ylabel("fraction of episodes")
-    ax.set_ylim(0, 1.02)
-    ax.legend()
-    ax.set_title("Time to end, ECDF")
-    return _save(fig, path)
+    return _finish_ecdf(ax, path)
 
 
 def _plot_comparison_success(eps: dict[str, dict], path: Path) -> Path:
@@ -233,10 +220,7 @@ def _plot_comparison_success(eps: dict[str, dict], path: Path) -> Path:
         lo, hi = wilson_interval(k, n)
         ax.bar([j], [k / n], yerr=[[k / n - lo], [hi - k / n]], capsize=8, color=f"C{j}")
     ax.set_xticks(np.arange(len(eps)), list(eps))
-    ax.set_ylim(0, 1)
-    ax.set_ylabel("success rate (Wilson 95 % CI)")
-    ax.set_title("Success rate")
-    return _save(fig, path)
+    return _finish(ax, path, "Success rate", "success rate (Wilson 95 % CI)", ylim=(0, 1))
 
 
 def plot_learning_curves(scalars: Mapping[str, Sequence[tuple[int, float]]], out_path: str | os.PathLike,
