@@ -156,9 +156,7 @@ class FrameRenderer:
 
     @env.setter
     def env(self, env: int) -> None:
-        if not 0 <= env < self.sim.num_envs:
-            raise ValueError(f"env must be in 0..{self.sim.num_envs - 1}, got {env}")
-        self._env = int(env)
+        self._env = _env_index(env, self.sim.num_envs)
 
     @property
     def backend(self) -> str:
@@ -377,9 +375,7 @@ class DroneOverlay:
 
     @env.setter
     def env(self, env: int) -> None:
-        if not 0 <= env < self.drones.num_envs:
-            raise ValueError(f"env must be in 0..{self.drones.num_envs - 1}, got {env}")
-        self._env = int(env)
+        self._env = _env_index(env, self.drones.num_envs)
 
     def __call__(self, image, cell_px: int) -> None:
         if tuple(image.shape) != (self.drones.rows * cell_px, self.drones.cols * cell_px):
@@ -431,6 +427,13 @@ def drone_overlay(drones, env: int = 0) -> DroneOverlay:
     ``FrameRenderer(drones.fire).render(overlay=drone_overlay(drones))``. Build it once and reuse it: it holds
     a small Taichi field (the palette) and its kernel compiles on first use."""
     return DroneOverlay(drones, env)
+
+
+def _env_index(env: int, num_envs: int) -> int:
+    """``env`` as an int, checked to be one of the ``num_envs`` envs that a renderer or overlay may draw."""
+    if not 0 <= env < num_envs:
+        raise ValueError(f"env must be in 0..{num_envs - 1}, got {env}")
+    return int(env)
 
 
 def _arrow_geometry(height: int, width: int) -> tuple[float, float, float] | None:
