@@ -213,7 +213,7 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, frames_dir
     run, --baseline greedy plays the heuristic controller on the same episodes (same seed and envs).
     """
     from roshan.runs import evaluate as ev
-    from roshan.runs import report
+    from roshan.runs.report.tables import format_comparison, format_table
     from roshan.runtime import init_taichi
 
     try:
@@ -233,9 +233,9 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, frames_dir
         _fail(exc)
     title = f"{target} ({Path(summary['checkpoint']).stem}, seed {seed})"
     if baseline is not None:
-        click.echo(report.format_comparison({"policy": summary, baseline: summary["baseline"]}, title))
+        click.echo(format_comparison({"policy": summary, baseline: summary["baseline"]}, title))
     else:
-        click.echo(report.format_table(summary, title))
+        click.echo(format_table(summary, title))
     click.echo(f"files: {summary['out_dir']}")
 
 
@@ -293,17 +293,17 @@ def study_run(config_path, space_path, trials, storage, workers, name, root, res
               prune, prune_startup, prune_warmup, max_retry, heartbeat, quiet, worker, slot, sets, arch, threads):
     """Tune any config keys with Optuna (TPE, median pruning); the study survives crashes and spreads over
     machines through a shared --storage (README: Multi-machine Optuna study)."""
-    from roshan.study.runner import runner as st
+    from roshan.study.runner import start_study
+    from roshan.study.trial import local_values, run_worker
 
     try:
         if worker:
-            sys.exit(st.run_worker(storage, name, root, slot, st.local_values(arch, threads), quiet, heartbeat,
-                                   max_retry))
-        st.start_study(config_path, space_path, sets, name=name, root=root, storage=storage, resume=resume,
-                       trials=trials, workers=workers, arch=arch, threads=threads, quiet=quiet, heartbeat=heartbeat,
-                       max_retry=max_retry, echo=click.echo, objective=objective, seed=seed,
-                       startup_trials=startup_trials, prune=prune, prune_startup=prune_startup,
-                       prune_warmup=prune_warmup)
+            sys.exit(run_worker(storage, name, root, slot, local_values(arch, threads), quiet, heartbeat, max_retry))
+        start_study(config_path, space_path, sets, name=name, root=root, storage=storage, resume=resume,
+                    trials=trials, workers=workers, arch=arch, threads=threads, quiet=quiet, heartbeat=heartbeat,
+                    max_retry=max_retry, echo=click.echo, objective=objective, seed=seed,
+                    startup_trials=startup_trials, prune=prune, prune_startup=prune_startup,
+                    prune_warmup=prune_warmup)
     except (ConfigError, MapError, ValueError, FileNotFoundError) as exc:
         _fail(exc)
 
@@ -320,11 +320,11 @@ def study_run(config_path, space_path, trials, storage, workers, name, root, res
 def study_report(target, name, root, top_k, out_dir, no_plots):
     """Best trials of a study (a name under --root, a study folder, or a storage URL), the mean of the top-k
     trials' parameters as a ready config YAML, and Optuna's plots."""
-    from roshan.study.runner import runner as st
+    from roshan.study.report import open_for_report, write_report
 
     try:
-        stu, default_out = st.open_for_report(target, root, name)
-        rep = st.write_report(stu, Path(out_dir) if out_dir else default_out, top_k, plots=not no_plots)
+        stu, default_out = open_for_report(target, root, name)
+        rep = write_report(stu, Path(out_dir) if out_dir else default_out, top_k, plots=not no_plots)
     except (ConfigError, ValueError, FileNotFoundError) as exc:
         _fail(exc)
     click.echo(f"study {stu.study_name}: {len(stu.trials)} trials; the best completed:")

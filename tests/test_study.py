@@ -2,6 +2,7 @@
 studies run by worker processes (a worker killed mid-trial, a killed study resumed) on a journal file and on a
 real PostgreSQL server."""
 
+import dataclasses
 import os
 import shutil
 import signal
@@ -21,8 +22,22 @@ from optuna.distributions import CategoricalDistribution, FloatDistribution, Int
 from optuna.trial import TrialState
 
 from roshan.cli import main
-from roshan.config import Config, load_run_config
-from roshan.study import runner as st
+from roshan.config import Config, load_run_config, to_dict
+from roshan.study.errors import StudyError
+from roshan.study.recipe import RECIPE_ATTR, Recipe, make_recipe
+from roshan.study.report import best_trials, mean_of_top_k, write_report
+from roshan.study.space import load_space, parse_space
+from roshan.study.storage import (
+    HEARTBEAT_ATTR,
+    HOST_ID,
+    WORKER_ATTR,
+    HeartbeatJournalStorage,
+    RetryStaleTrial,
+    open_storage,
+    worker_record,
+)
+from roshan.study.studies import _plain, _pruner, budget, fail_stale, load_study, prepare_study, tpe_sampler
+from roshan.study.trial import TrialDisplay, make_objective, objective_value
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIG = REPO / "configs" / "fly_simple.yaml"
@@ -36,7 +51,7 @@ SPACE = {"params": {"fly.rewards.goal": {"type": "float", "low": 0.2, "high": 5.
 
 
 def parse(space: dict):
-    return st.parse_space(space, Config(), where="space.yaml")
+    return parse_space(space, Config(), where="space.yaml")
 
 
 def one_param(spec: dict, key: str = "fly.rewards.goal") -> dict:
@@ -64,22 +79,22 @@ def one_param(spec: dict, key: str = "fly.rewards.goal") -> dict:
     ({**SPACE, "tie": {"fly.rewards.goal": "fly.rewards.boundary"}}, "this key is sampled itself"),
 ])
 def test_bad_search_spaces_are_rejected_with_the_key_and_the_reason(space, message):
-    with pytest.raises(st.StudyError) as err:
+    with pytest.raises(StudyError) as err:
         parse(space)
     assert message in str(err.value) and str(err.value).startswith("space.yaml")
 
 
 def test_shipped_search_spaces():
     base = load_run_config(REPO / "configs" / "fly_collision.yaml")
-    fly = st.load_space(REPO / "configs" / "spaces" / "fly_rewards.yaml", base)
+    fly = load_space(REPO / "configs" / "spaces" / "fly_rewards.yaml", base)
     ranges = {p.key.rsplit(".", 1)[1]: (p.low, p.high, p.log) for p in fly.params}
     assert ranges == {"goal": (0.2, 5.0, True), "boundary": (-5.0, -0.2, False), "extinguish": (1e-3, 0.2, True),
                       "timeout": (-5.0, -0.2, False), "progress": (1e-3, 0.5, True), "proximity": (-0.5, -1e-3, False)}
     assert fly.tie == (("fly.rewards.collision", "fly.rewards.boundary"),)
     sampled = fly.sample(optuna.create_study().ask())
     assert sampled["fly.rewards.collision"] == sampled["fly.rewards.boundary"]
-    assert len(st.load_space(REPO / "configs" / "spaces" / "ppo.yaml", base).params) == 10
-    planner = st.load_space(REPO / "configs" / "spaces" / "planner_rewards.yaml",
+    assert len(load_space(REPO / "configs" / "spaces" / "ppo.yaml", base).params) == 10
+    planner = load_space(REPO / "configs" / "spaces" / "planner_rewards.yaml",
                             load_run_config(REPO / "configs" / "planner.yaml"))
     assert {p.key for p in planner.params} == {f"planner.rewards.{k}" for k in
                                                ("goal", "burned", "ground", "timeout", "same", "extinguish", "fast")}
@@ -88,7 +103,7 @@ def test_shipped_search_spaces():
 def test_yaml_numbers_without_a_dot_are_read_as_numbers(tmp_path):
     path = tmp_path / "s.yaml"
     path.write_text("params:\n  ppo.lr: {type: float, low: 1e-5, high: 1e-3, log: true}\n")
-    (p,) = st.load_space(path, Config()).params
+    (p,) = load_space(path, Config()).params
     assert (p.low, p.high) == (1e-5, 1e-3)
 
 
@@ -105,8 +120,8 @@ def test_cli_rejects_bad_space_and_unreachable_storage_before_creating_anything(
                                   "--trials", "1", "--storage", url, "--root", str(tmp_path)])
     assert r.exit_code != 0 and "s3cret" not in r.output
     assert "cannot open the study storage postgresql://roshan:***@127.0.0.1:1/roshan" in r.output
-    with pytest.raises(st.StudyError, match="cannot open the study storage nosuchdb://"):
-        st.open_storage("nosuchdb://host/db")
+    with pytest.raises(StudyError, match="cannot open the study storage nosuchdb://"):
+        open_storage("nosuchdb://host/db")
     r = CliRunner().invoke(main, ["study", "--resume", "--name", "nope", "--root", str(tmp_path)])
     assert r.exit_code != 0 and "no study 'nope'" in r.output and "--trials N" in r.output
     assert not list(tmp_path.glob("*/trial_*"))
@@ -117,23 +132,23 @@ def test_cli_rejects_bad_space_and_unreachable_storage_before_creating_anything(
 
 @pytest.mark.filterwarnings("ignore::optuna.exceptions.ExperimentalWarning", "ignore:Heartbeat of storage")
 def test_stale_trials_are_failed_and_queued_again_with_their_parameters(tmp_path):
-    storage = st.HeartbeatJournalStorage(str(tmp_path / "s.journal"), heartbeat_interval=1, grace_period=30,
-                                         callback=st.RetryStaleTrial(max_retry=3))
+    storage = HeartbeatJournalStorage(str(tmp_path / "s.journal"), heartbeat_interval=1, grace_period=30,
+                                         callback=RetryStaleTrial(max_retry=3))
     study = optuna.create_study(storage=storage)
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
     now = time.time()
     cases = {"remote, silent": ({"host": "elsewhere/1", "pid": 1}, now - 100),
              "remote, beating": ({"host": "elsewhere/1", "pid": 1}, now),
-             "here, dead": ({"host": st.HOST_ID, "pid": dead.pid, "start": None}, now),
-             "here, alive": (st.worker_record(), now)}
+             "here, dead": ({"host": HOST_ID, "pid": dead.pid, "start": None}, now),
+             "here, alive": (worker_record(), now)}
     trials = {}
     for case, (worker, beat) in cases.items():
         trial = study.ask({"x": FloatDistribution(0.0, 1.0)})
-        trial.set_user_attr(st.WORKER_ATTR, worker)
-        trial.set_user_attr(st.HEARTBEAT_ATTR, beat)
+        trial.set_user_attr(WORKER_ATTR, worker)
+        trial.set_user_attr(HEARTBEAT_ATTR, beat)
         trials[case] = trial.number
-    st.fail_stale(study)
+    fail_stale(study)
     by_number = {t.number: t for t in study.trials}
     states = {case: by_number[n].state for case, n in trials.items()}
     assert states == {"remote, silent": TrialState.FAIL, "remote, beating": TrialState.RUNNING,
@@ -142,8 +157,8 @@ def test_stale_trials_are_failed_and_queued_again_with_their_parameters(tmp_path
     assert sorted(t.system_attrs["failed_trial"] for t in waiting) == [trials["remote, silent"], trials["here, dead"]]
     for t in waiting:  # same parameters, none of the dead worker's liveness records
         assert t.params == by_number[t.system_attrs["failed_trial"]].params
-        assert st.WORKER_ATTR not in t.user_attrs and st.HEARTBEAT_ATTR not in t.user_attrs
-    b = st.budget(study, target=4)
+        assert WORKER_ATTR not in t.user_attrs and HEARTBEAT_ATTR not in t.user_attrs
+    b = budget(study, target=4)
     assert (b.used, b.waiting, b.to_start) == (2, 2, 2)  # the two retried trials do not count, their retries do
 
 
@@ -152,9 +167,9 @@ def test_stale_trials_are_failed_and_queued_again_with_their_parameters(tmp_path
 
 def constructed_study(direction="maximize"):
     """Six trials with known values; trial 4 failed and trial 5 was pruned (neither may count)."""
-    recipe = st.Recipe(config=st.to_dict(load_run_config(CONFIG)), space=SPACE, trials=6)
+    recipe = Recipe(config=to_dict(load_run_config(CONFIG)), space=SPACE, trials=6)
     study = optuna.create_study(direction=direction)
-    study.set_user_attr(st.RECIPE_ATTR, st._plain(st.dataclasses.asdict(recipe)))
+    study.set_user_attr(RECIPE_ATTR, _plain(dataclasses.asdict(recipe)))
     dists = {"fly.rewards.goal": FloatDistribution(0.2, 5.0, log=True),
              "fly.rewards.boundary": FloatDistribution(-5.0, -0.2), "ppo.k_epochs": IntDistribution(1, 3),
              "ppo.minibatch": CategoricalDistribution(["samples", "sequences"])}
@@ -171,15 +186,15 @@ def constructed_study(direction="maximize"):
 
 def test_mean_of_top_k_trials_is_a_ready_config(tmp_path):
     study = constructed_study()
-    assert [t.number for t in st.best_trials(study, 3)] == [2, 3, 1]
-    top3 = st.mean_of_top_k(study, 3)
+    assert [t.number for t in best_trials(study, 3)] == [2, 3, 1]
+    top3 = mean_of_top_k(study, 3)
     assert top3["fly.rewards.goal"] == pytest.approx((3.0 + 5.0 + 2.0) / 3)
     assert top3["fly.rewards.boundary"] == pytest.approx(-10.0 / 3)
     assert top3["fly.rewards.collision"] == top3["fly.rewards.boundary"]  # the space's tie
     assert top3["ppo.k_epochs"] == 2 and top3["ppo.minibatch"] == "samples"  # (3+3+1)/3 rounded; most common
-    assert st.mean_of_top_k(study, 100)["fly.rewards.goal"] == pytest.approx(11.0 / 4)  # all 4 completed
+    assert mean_of_top_k(study, 100)["fly.rewards.goal"] == pytest.approx(11.0 / 4)  # all 4 completed
 
-    rep = st.write_report(study, tmp_path, k=3, plots=True)
+    rep = write_report(study, tmp_path, k=3, plots=True)
     cfg = load_run_config(tmp_path / "top3_mean.yaml")
     assert cfg.fly.rewards.goal == pytest.approx(10.0 / 3) and cfg.fly.rewards.collision == pytest.approx(-10.0 / 3)
     assert cfg.ppo.k_epochs == 2 and cfg.train.max_minutes == load_run_config(CONFIG).train.max_minutes
@@ -193,7 +208,7 @@ def test_mean_of_top_k_trials_is_a_ready_config(tmp_path):
         assert (tmp_path / f"{name}.png").stat().st_size > 1000, rep["plots"][name]
 
     low = constructed_study("minimize")  # e.g. time to end
-    assert [t.number for t in st.best_trials(low, 2)] == [0, 1]
+    assert [t.number for t in best_trials(low, 2)] == [0, 1]
 
 
 # ------------------------------------------------------------------------------------------------ recipe
@@ -201,35 +216,35 @@ def test_mean_of_top_k_trials_is_a_ready_config(tmp_path):
 
 def test_objectives_directions_and_pruners():
     summary = {"success_rate": 0.25, "reward": {"mean": -0.5}, "tte": {"mean": 120.0}}
-    assert [st.objective_value(summary, o) for o in ("success", "reward", "tte")] == [0.25, -0.5, 120.0]
-    assert st.objective_value({"tte": {"mean": None}}, "tte") == float("inf")  # no episode: the worst time
-    recipe = st.Recipe(config={}, space=SPACE, objective="tte")
-    assert recipe.direction == "minimize" and isinstance(st._pruner(recipe), optuna.pruners.NopPruner)
-    pruner = st._pruner(st.dataclasses.replace(recipe, objective="success", prune_startup=3, prune_warmup=7))
+    assert [objective_value(summary, o) for o in ("success", "reward", "tte")] == [0.25, -0.5, 120.0]
+    assert objective_value({"tte": {"mean": None}}, "tte") == float("inf")  # no episode: the worst time
+    recipe = Recipe(config={}, space=SPACE, objective="tte")
+    assert recipe.direction == "minimize" and isinstance(_pruner(recipe), optuna.pruners.NopPruner)
+    pruner = _pruner(dataclasses.replace(recipe, objective="success", prune_startup=3, prune_warmup=7))
     assert isinstance(pruner, optuna.pruners.MedianPruner)
     assert (pruner._n_startup_trials, pruner._n_warmup_steps) == (3, 7)
-    sampler = st._sampler(recipe, seed=1)
+    sampler = tpe_sampler(recipe, seed=1)
     assert sampler._multivariate and sampler._constant_liar and sampler._n_startup_trials == 15
 
 
 def test_resume_checks_the_recipe_and_may_change_the_budget(tmp_path):
     storage = optuna.storages.InMemoryStorage()
-    recipe = st.make_recipe(CONFIG, TINY, _space_file(tmp_path), trials=3)
-    st.prepare_study(storage, "r", recipe, resume=False, trials=3)
-    with pytest.raises(st.StudyError, match="already exists"):
-        st.prepare_study(storage, "r", recipe, resume=False, trials=3)
-    other = st.make_recipe(CONFIG, [*TINY, "ppo.lr=0.001"], _space_file(tmp_path), trials=3)
-    with pytest.raises(st.StudyError, match=r"another recipe.*config.ppo.lr: 0.0001575 in the study, 0.001 here"):
-        st.prepare_study(storage, "r", other, resume=True, trials=3)
-    with pytest.raises(st.StudyError, match="objective: 'success' in the study, 'reward' here"):
-        st.prepare_study(storage, "r", None, resume=True, settings={"objective": "reward"})
-    _, stored = st.prepare_study(storage, "r", None, resume=True, settings={"objective": "success"}, trials=5)
-    assert stored.trials == 5 and st.load_study(storage, "r")[1].trials == 5
+    recipe = make_recipe(CONFIG, TINY, _space_file(tmp_path), trials=3)
+    prepare_study(storage, "r", recipe, resume=False, trials=3)
+    with pytest.raises(StudyError, match="already exists"):
+        prepare_study(storage, "r", recipe, resume=False, trials=3)
+    other = make_recipe(CONFIG, [*TINY, "ppo.lr=0.001"], _space_file(tmp_path), trials=3)
+    with pytest.raises(StudyError, match=r"another recipe.*config.ppo.lr: 0.0001575 in the study, 0.001 here"):
+        prepare_study(storage, "r", other, resume=True, trials=3)
+    with pytest.raises(StudyError, match="objective: 'success' in the study, 'reward' here"):
+        prepare_study(storage, "r", None, resume=True, settings={"objective": "reward"})
+    _, stored = prepare_study(storage, "r", None, resume=True, settings={"objective": "success"}, trials=5)
+    assert stored.trials == 5 and load_study(storage, "r")[1].trials == 5
 
 
 def test_each_worker_shows_its_trial_on_its_own_line(capsys):
     cfg = load_run_config(CONFIG, TINY)
-    display = st.TrialDisplay(7, cfg, slot=1, quiet=False)
+    display = TrialDisplay(7, cfg, slot=1, quiet=False)
     display.update({"updates": 1, "env_steps": 16, "objective": 0.25, "reward": -0.125})
     display.bar.refresh()
     out = capsys.readouterr().err
@@ -244,14 +259,14 @@ def test_each_worker_shows_its_trial_on_its_own_line(capsys):
 
 
 def test_a_trial_below_the_median_is_pruned_and_train_stops_cleanly(tmp_path):
-    recipe = st.make_recipe(CONFIG, TINY, _space_file(tmp_path), trials=2, prune_startup=1, prune_warmup=0)
+    recipe = make_recipe(CONFIG, TINY, _space_file(tmp_path), trials=2, prune_startup=1, prune_warmup=0)
     storage = optuna.storages.InMemoryStorage()
-    st.prepare_study(storage, "p", recipe, resume=False, trials=2)
-    study, _ = st.load_study(storage, "p")
+    prepare_study(storage, "p", recipe, resume=False, trials=2)
+    study, _ = load_study(storage, "p")
     assert isinstance(study.pruner, optuna.pruners.MedianPruner)
     assert isinstance(study.sampler, optuna.samplers.TPESampler)
     study.add_trial(optuna.create_trial(state=TrialState.COMPLETE, value=1.0, intermediate_values={1: 1.0, 2: 1.0}))
-    study.optimize(st.make_objective(recipe, tmp_path, "p", quiet=True), n_trials=1)
+    study.optimize(make_objective(recipe, tmp_path, "p", quiet=True), n_trials=1)
     trial = study.trials[-1]
     assert trial.state == TrialState.PRUNED and trial.intermediate_values == {1: 0.0}  # pruned after update 1
     run_dir = Path(trial.user_attrs["run_dir"])
@@ -302,8 +317,8 @@ def running_workers(storage, name: str) -> list[dict]:
     if name not in optuna.get_all_study_names(storage):
         return []
     study = optuna.load_study(study_name=name, storage=storage)
-    return [t.user_attrs[st.WORKER_ATTR] for t in study.get_trials(states=(TrialState.RUNNING,))
-            if st.WORKER_ATTR in t.user_attrs]
+    return [t.user_attrs[WORKER_ATTR] for t in study.get_trials(states=(TrialState.RUNNING,))
+            if WORKER_ATTR in t.user_attrs]
 
 
 def run_study_killing_a_worker(tmp_path: Path, name: str, storage_url: str | None):
@@ -314,7 +329,7 @@ def run_study_killing_a_worker(tmp_path: Path, name: str, storage_url: str | Non
     url = storage_url or str(tmp_path / name / "study.journal")
     try:
         wait_until(lambda: storage_url or Path(url).exists(), proc, log)
-        reader = st.open_storage(url, heartbeat=None)
+        reader = open_storage(url, heartbeat=None)
         workers = wait_until(lambda: (w := running_workers(reader, name)) and len(w) == 2 and w, proc, log)
         os.kill(workers[0]["pid"], signal.SIGKILL)
         assert proc.wait(timeout=240) == 0, log.read_text()[-3000:]
@@ -329,10 +344,10 @@ def check_study_survived_the_kill(study: optuna.Study, killed: dict, log: str) -
     by_state = {s: [t for t in study.trials if t.state == s] for s in TrialState}
     assert len(by_state[TrialState.COMPLETE]) == 3 and len(by_state[TrialState.FAIL]) == 1, log[-3000:]
     (failed,) = by_state[TrialState.FAIL]
-    assert failed.user_attrs[st.WORKER_ATTR]["pid"] == killed["pid"]
+    assert failed.user_attrs[WORKER_ATTR]["pid"] == killed["pid"]
     (retry,) = [t for t in by_state[TrialState.COMPLETE] if t.system_attrs.get("failed_trial") == failed.number]
-    assert retry.params == failed.params and retry.user_attrs[st.WORKER_ATTR]["pid"] != killed["pid"]
-    assert len({t.user_attrs[st.WORKER_ATTR]["pid"] for t in study.trials}) == 4  # a process per trial
+    assert retry.params == failed.params and retry.user_attrs[WORKER_ATTR]["pid"] != killed["pid"]
+    assert len({t.user_attrs[WORKER_ATTR]["pid"] for t in study.trials}) == 4  # a process per trial
     assert f"was killed by signal {int(signal.SIGKILL)}" in log and f"trial {failed.number}: failed" in log
     for t in by_state[TrialState.COMPLETE]:
         run_dir = Path(t.user_attrs["run_dir"])
@@ -346,11 +361,11 @@ def check_study_survived_the_kill(study: optuna.Study, killed: dict, log: str) -
 def test_two_workers_share_a_journal_study_and_survive_a_killed_worker(tmp_path):
     study, killed, log = run_study_killing_a_worker(tmp_path, "s", None)
     check_study_survived_the_kill(study, killed, log)
-    assert all(st.HEARTBEAT_ATTR in t.user_attrs for t in study.trials if t.state == TrialState.COMPLETE)
+    assert all(HEARTBEAT_ATTR in t.user_attrs for t in study.trials if t.state == TrialState.COMPLETE)
     r = CliRunner().invoke(main, ["study", "report", "s", "--root", str(tmp_path), "--top-k", "2"])
     assert r.exit_code == 0, r.output
     mean = load_run_config(tmp_path / "s" / "report" / "top2_mean.yaml")
-    top = st.best_trials(study, 2)
+    top = best_trials(study, 2)
     assert mean.fly.rewards.goal == pytest.approx(sum(t.params["fly.rewards.goal"] for t in top) / 2)
     assert "top2_mean.yaml" in r.output and (tmp_path / "s" / "report" / "history.png").is_file()
 
@@ -360,7 +375,7 @@ def test_a_killed_study_resumes_where_it_stopped(tmp_path):
     journal, log = tmp_path / "k" / "study.journal", tmp_path / "k.log"
     try:
         wait_until(journal.exists, proc, log)
-        reader = st.open_storage(str(journal), heartbeat=None)
+        reader = open_storage(str(journal), heartbeat=None)
         wait_until(lambda: running_workers(reader, "k"), proc, log)
     finally:
         os.killpg(proc.pid, signal.SIGKILL)  # the launcher and its worker, mid-trial
@@ -382,7 +397,7 @@ def test_ctrl_c_fails_the_running_trial_and_queues_it_again(tmp_path):
     journal, log = tmp_path / "c" / "study.journal", tmp_path / "c.log"
     try:
         wait_until(journal.exists, proc, log)
-        reader = st.open_storage(str(journal), heartbeat=None)
+        reader = open_storage(str(journal), heartbeat=None)
         wait_until(lambda: running_workers(reader, "c"), proc, log)
         os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C in the terminal does
         assert proc.wait(timeout=120) != 0
@@ -453,6 +468,6 @@ def test_two_workers_share_a_postgresql_study_and_survive_a_killed_worker(tmp_pa
         assert r.exit_code == 0, r.output
         assert (tmp_path / name / "report" / "top3_mean.yaml").is_file() and "trial" in r.output
     finally:
-        storage = st.open_storage(postgres_url, heartbeat=None)
+        storage = open_storage(postgres_url, heartbeat=None)
         if name in optuna.get_all_study_names(storage):
             optuna.delete_study(study_name=name, storage=storage)

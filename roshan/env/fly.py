@@ -7,12 +7,12 @@ import torch
 from gymnasium.vector import AutoresetMode
 
 from roshan.config import Config, DroneConfig, FlyConfig
+from roshan.env.render import EnvZeroFrames
 from roshan.episode import EPISODE_FIELDS
 from roshan.kernels import observe
 from roshan.kernels.drones import DroneSim
 from roshan.kernels.fire import FireSim
 from roshan.kernels.fly import FlyKernels, time_limit
-from roshan.kernels.render import EnvZeroFrames
 from roshan.maps import load_map
 from roshan.runtime import ensure_taichi, torch_device
 

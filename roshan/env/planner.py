@@ -17,13 +17,13 @@ from gymnasium.vector import AutoresetMode
 from roshan.algos.frozen import FrozenFlyPolicy
 from roshan.config import CONTROLLERS, Config, PlannerConfig
 from roshan.env.fly import fly_obs_views
+from roshan.env.render import EnvZeroFrames
 from roshan.episode import EPISODE_FIELDS
 from roshan.kernels import observe
 from roshan.kernels.drones import DroneSim
 from roshan.kernels.explore import ExploreMaps
 from roshan.kernels.fire import FireSim
 from roshan.kernels.planner import PlannerKernels, obs_layout, planner_time_limit
-from roshan.kernels.render import EnvZeroFrames
 from roshan.kernels.rewards import PlannerCoefficients
 from roshan.maps import load_map
 from roshan.runtime import ensure_taichi, torch_device

@@ -33,22 +33,21 @@ Backends only differ in how the finished field leaves Taichi:
   faster than GGUI's RGBA ``window.save_image``).
 - ``auto``: ``ggui`` if an offscreen window opens, else ``raster`` with one warning.
 
-Taichi 1.7 crashes (at ``destroy`` or at interpreter exit) when two GGUI windows are alive at once, so the
-process holds at most one: renderers of the same size share it, and a renderer of another size replaces it
-(about 0.2 s to open).
+The offscreen GGUI window is the process's one shared window of :mod:`roshan.ggui`: renderers of the same size
+share it, and a renderer of another size replaces it.
 """
 
 import math
 import sys
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import taichi as ti
 from PIL import Image
-from taichi.lang import impl
 
+from roshan.ggui import acquire_window, release_window
 from roshan.kernels.fire import C_STATE, N_CONV, N_RAD
 from roshan.kernels.particles import P_X1, P_X2, P_Y, R_Y, radiation_position
 from roshan.maps import BURNED, CLASSES, FLOODED
@@ -60,7 +59,6 @@ MIN_RADIUS_PX = 0.75  # > sqrt(2)/2: some pixel centre always lies inside the pa
 BURNED_WEIGHT, FLOODED_WEIGHT = 20, 40  # state colour : original class colour (firespin.md 13)
 ARROW_BACKDROP = (21, 19, 51)  # the reference's background colour, behind the wind arrow
 ARROW_BACKDROP_ALPHA = 0.65
-WINDOW_TITLE = "ROSHAN-Taichi"
 NO_GGUI_HINT = ("GGUI/Vulkan is unavailable, so frames are rendered with the raster fallback (numpy/PIL). "
                 "For GGUI install a Vulkan driver, e.g. `apt-get install -y mesa-vulkan-drivers` (Debian).")
 
@@ -158,9 +156,7 @@ class FrameRenderer:
 
     @env.setter
     def env(self, env: int) -> None:
-        if not 0 <= env < self.sim.num_envs:
-            raise ValueError(f"env must be in 0..{self.sim.num_envs - 1}, got {env}")
-        self._env = int(env)
+        self._env = _env_index(env, self.sim.num_envs)
 
     @property
     def backend(self) -> str:
@@ -174,7 +170,7 @@ class FrameRenderer:
         """The offscreen ``ti.ui.Window`` this renderer draws into, or ``None`` on the raster backend."""
         if self.backend == "ggui":
             try:
-                self._window = _acquire_window((self.width, self.height), self._window)
+                self._window = acquire_window((self.width, self.height), self._window)
             except Exception as err:  # say what to do instead of Taichi's bare "Vulkan must be available"
                 raise RuntimeError(f"backend='ggui': GGUI/Vulkan is unavailable ({err}). Install a Vulkan "
                                    "driver (`apt-get install -y mesa-vulkan-drivers` on Debian) or use "
@@ -226,7 +222,7 @@ class FrameRenderer:
     def close(self) -> None:
         """Give up this renderer's claim on the shared GGUI window (destroyed once no renderer uses it)."""
         if self._window is not None:
-            _release_window()
+            release_window()
             self._window = None
 
     # ------------------------------------------------------------------------------------------ backends
@@ -234,7 +230,7 @@ class FrameRenderer:
     def _resolve_auto(self) -> None:
         global _warned_no_ggui
         try:
-            self._window = _acquire_window((self.width, self.height), None)
+            self._window = acquire_window((self.width, self.height), None)
             self._backend = "ggui"
         except Exception:  # any failure to open an offscreen window means no usable GGUI here
             self._backend = "raster"
@@ -379,9 +375,7 @@ class DroneOverlay:
 
     @env.setter
     def env(self, env: int) -> None:
-        if not 0 <= env < self.drones.num_envs:
-            raise ValueError(f"env must be in 0..{self.drones.num_envs - 1}, got {env}")
-        self._env = int(env)
+        self._env = _env_index(env, self.drones.num_envs)
 
     def __call__(self, image, cell_px: int) -> None:
         if tuple(image.shape) != (self.drones.rows * cell_px, self.drones.cols * cell_px):
@@ -435,25 +429,11 @@ def drone_overlay(drones, env: int = 0) -> DroneOverlay:
     return DroneOverlay(drones, env)
 
 
-class EnvZeroFrames:
-    """``render()`` of the vector envs: env 0's land cover, fire and drones through the raster backend, built on
-    the first call (rendering is optional, and the renderer compiles kernels)."""
-
-    def __init__(self, drones):
-        self.drones = drones
-        self._renderer: FrameRenderer | None = None
-        self._overlay: DroneOverlay | None = None
-
-    def render(self) -> np.ndarray:
-        if self._renderer is None:
-            self._renderer = FrameRenderer(self.drones.fire, backend="raster")
-            self._overlay = drone_overlay(self.drones)
-        return self._renderer.render(overlay=self._overlay)
-
-    def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+def _env_index(env: int, num_envs: int) -> int:
+    """``env`` as an int, checked to be one of the ``num_envs`` envs that a renderer or overlay may draw."""
+    if not 0 <= env < num_envs:
+        raise ValueError(f"env must be in 0..{num_envs - 1}, got {env}")
+    return int(env)
 
 
 def _arrow_geometry(height: int, width: int) -> tuple[float, float, float] | None:
@@ -473,74 +453,5 @@ def _user_stacklevel() -> int:
     return level
 
 
-# ---------------------------------------------------------------------------------------------- GGUI window
-
-# The runtime is kept (not its id) so a re-initialised Taichi can never look like the one the window belongs to.
-_shared: dict[str, object] = {"window": None, "res": None, "runtime": None, "users": 0}
+# The auto backend warns once per process when it falls back to raster.
 _warned_no_ggui = False
-
-
-def _open_window(res: tuple[int, int]):
-    """A new offscreen GGUI window of ``res = (width, height)``; raises if GGUI/Vulkan is unavailable."""
-    window = ti.ui.Window(WINDOW_TITLE, res, show_window=False)
-    _shared.update(window=window, res=tuple(res), runtime=impl.get_runtime())
-    return window
-
-
-def _close_window() -> None:
-    if _shared["window"] is not None:
-        _shared["window"].destroy()
-    _shared.update(window=None, res=None, runtime=None)
-
-
-def _acquire_window(res: tuple[int, int], held):
-    """The process's one GGUI window, sized ``res``; ``held`` is the window the caller already counts as a user of.
-
-    Replaces the window when the size differs or when Taichi was re-initialised since it was opened.
-    """
-    if _shared["res"] != tuple(res) or _shared["runtime"] is not impl.get_runtime():
-        _close_window()
-        _open_window(res)
-    if held is None:
-        _shared["users"] += 1
-    return _shared["window"]
-
-
-def _release_window() -> None:
-    _shared["users"] = max(0, _shared["users"] - 1)
-    if _shared["users"] == 0:
-        _close_window()
-
-
-def ggui_available() -> bool:
-    """Whether an offscreen GGUI window can be opened in this process (opens the shared window if none is open)."""
-    if _shared["window"] is not None:
-        return True
-    try:
-        _open_window((16, 16))
-        return True
-    except Exception:  # any failure to open a window means no usable GGUI here
-        return False
-
-
-# ---------------------------------------------------------------------------------------------- GIF
-
-
-def write_gif(frames: Sequence[Path | str | np.ndarray], out: Path | str, fps: int = 10) -> Path:
-    """Write frames (PNG paths or (H, W, 3) uint8 arrays) as a GIF that loops forever; returns ``out``."""
-    if not frames:
-        raise ValueError("write_gif needs at least one frame")
-    if fps < 1:
-        raise ValueError(f"fps must be >= 1, got {fps}")
-    images = []
-    for f in frames:
-        if isinstance(f, np.ndarray):
-            images.append(Image.fromarray(np.asarray(f, np.uint8)).convert("RGB"))
-        else:
-            with Image.open(f) as im:
-                images.append(im.convert("RGB"))
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    # Pillow merges identical consecutive frames into one longer frame; the GIF's total duration is kept.
-    images[0].save(out, save_all=True, append_images=images[1:], duration=max(1, round(1000 / fps)), loop=0)
-    return out

@@ -14,7 +14,6 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from roshan.runs import report
 from roshan.algos.buffers import ReplayBuffer
 from roshan.algos.frozen import load_agent, policy_fn
 from roshan.algos.networks import flatten_drones
@@ -22,8 +21,13 @@ from roshan.config import apply_overrides
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import straight_to_goal
 from roshan.episode import EPISODE_FIELDS, REASONS
-from roshan.kernels.render import write_gif
+from roshan.io import write_gif
 from roshan.runs.envs import make_env
+from roshan.runs.report.files import write_episodes_csv, write_summary_json
+from roshan.runs.report.plots import plot_comparison, plot_episodes, plot_learning_curves
+from roshan.runs.report.scalars import read_tensorboard_scalars
+from roshan.runs.report.stats import summarize
+from roshan.runs.report.tables import format_table
 from roshan.runtime import ensure_taichi, torch_device
 
 
@@ -107,11 +111,11 @@ def planner_random_fn(seed: int):
 def write_outputs(episodes: dict, out_dir: Path, title: str) -> dict:
     """episodes.csv, summary.json and the plots in ``out_dir``; returns the summary."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    summary = report.summarize(episodes)
-    report.write_episodes_csv(episodes, out_dir / "episodes.csv")
-    report.write_summary_json(summary, out_dir / "summary.json")
-    report.plot_episodes(episodes, out_dir)
-    (out_dir / "table.txt").write_text(report.format_table(summary, title) + "\n")
+    summary = summarize(episodes)
+    write_episodes_csv(episodes, out_dir / "episodes.csv")
+    write_summary_json(summary, out_dir / "summary.json")
+    plot_episodes(episodes, out_dir)
+    (out_dir / "table.txt").write_text(format_table(summary, title) + "\n")
     return summary
 
 
@@ -133,7 +137,7 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
     ``<run>/eval``). ``overrides`` (``section.key=value``) change the evaluation setting, not the network.
     With ``baseline`` (random | greedy) the scripted policy runs on the same episodes (same seed: same fire
     layouts and wind) and its summary is returned under ``"baseline"``.
-    Returns the summary dict of :func:`roshan.report.summarize` plus ``checkpoint`` and ``out_dir``."""
+    Returns the summary dict of :func:`roshan.runs.report.stats.summarize` plus ``checkpoint`` and ``out_dir``."""
     ensure_taichi()
     cfg, agent, path = load_agent(target, which, torch_device())
     cfg = apply_overrides(cfg, overrides) if overrides else cfg
@@ -161,15 +165,15 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
     summary = write_outputs(eps, out, f"{run_dir.name} ({path.stem}, {len(eps['reward'])} episodes, seed {seed})")
     tb = run_dir / "tb"
     if tb.is_dir():
-        scalars = report.read_tensorboard_scalars(tb)
+        scalars = read_tensorboard_scalars(tb)
         if scalars:
-            report.plot_learning_curves(scalars, out / "learning_curves.png")
+            plot_learning_curves(scalars, out / "learning_curves.png")
     is_planner = getattr(env, "is_planner", False)
     payload = flyagent_json(summary, is_planner)
     if base_eps is not None:
         base = write_outputs(base_eps, out / baseline, f"{baseline} baseline ({len(base_eps['reward'])} episodes, "
                                                          f"seed {seed})")
-        report.plot_comparison({"policy": eps, baseline: base_eps}, out)
+        plot_comparison({"policy": eps, baseline: base_eps}, out)
         payload = {"policy": payload, baseline: flyagent_json(base, is_planner)}
         summary["baseline"] = base
     if json_path is not None:

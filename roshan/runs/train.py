@@ -24,7 +24,7 @@ from roshan.algos.buffers import ReplayBuffer
 from roshan.algos.frozen import policy_fn
 from roshan.algos.networks import flatten_drones
 from roshan.algos.planner import PlannerRollout
-from roshan.algos.ppo import FrameCache, PPO, Rollout
+from roshan.algos.ppo import PPO, FrameCache, Rollout
 from roshan.checkpoints import (
     check_same_model,
     checkpoint_path,
@@ -38,11 +38,11 @@ from roshan.checkpoints import (
 from roshan.config import Config, apply_overrides, dump_config
 from roshan.env.fly import FlyVectorEnv
 from roshan.episode import EPISODE_FIELDS, FAILURES, REASONS
-from roshan.runs import report
 from roshan.runs.envs import make_env
 from roshan.runs.evaluate import evaluate_run, run_episodes
+from roshan.runs.report.stats import evaluation_scalars, summarize
+from roshan.runs.report.tables import format_table
 from roshan.runtime import current_arch, ensure_taichi, init_taichi, torch_device
-
 
 # ------------------------------------------------------------------------------------------------ episodes
 
@@ -490,8 +490,8 @@ class Trainer:
                                      evaluation=True)
         episodes = run_episodes(self.eval_env, policy_fn(self.agent), tc.eval_episodes, seed=tc.seed + 10_000,
                                 progress_bar=False)
-        summary = report.summarize(episodes)
-        for tag, value in report.evaluation_scalars(summary).items():
+        summary = summarize(episodes)
+        for tag, value in evaluation_scalars(summary).items():
             self.writer.add_scalar(tag, value, self.progress.env_steps or self.progress.updates)
         # The deterministic policy is what gets shipped, and in the collision setting it can be much better or worse
         # than the stochastic training objective says: keep the weights that evaluated best.
@@ -601,4 +601,4 @@ def result_lines(res: dict) -> str:
             f"({res['env_steps'] / max(res['seconds'], 1e-9):,.0f} env-steps/s), {res['train_episodes']} episodes")
     if "eval" not in res:
         return head
-    return head + "\n" + report.format_table(res["eval"], f"evaluation of {Path(res['run_dir']).name}")
+    return head + "\n" + format_table(res["eval"], f"evaluation of {Path(res['run_dir']).name}")

@@ -17,8 +17,9 @@ import numpy as np
 from roshan.config import Config, ConfigError, FlyConfig, replace, to_dict
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import POLICIES, policy_actions
+from roshan.io import write_gif
 from roshan.kernels.fire import FireSim
-from roshan.kernels.render import FrameRenderer, drone_overlay, write_gif
+from roshan.kernels.render import FrameRenderer, drone_overlay
 from roshan.maps import load_map
 from roshan.runtime import init_taichi
 

@@ -8,10 +8,12 @@ import taichi as ti
 from PIL import Image
 
 from roshan.config import IgnitionConfig
+from roshan.ggui import ggui_available
+from roshan.io import write_gif
 from roshan.kernels import particles as pt
 from roshan.kernels import render
 from roshan.kernels.fire import N_CONV, N_RAD, FireSim
-from roshan.kernels.render import FrameRenderer, cell_colours, default_cell_px, write_gif
+from roshan.kernels.render import FrameRenderer, cell_colours, default_cell_px
 from roshan.maps import BURNED, BURNING, CLASSES, FLOODED, load_map
 from roshan.runtime import init_taichi
 
@@ -44,7 +46,7 @@ def sim():
 @pytest.fixture
 def ggui():
     init_taichi("cpu")
-    if not render.ggui_available():
+    if not ggui_available():
         pytest.skip("GGUI cannot open an offscreen window here (no Vulkan driver: apt-get install mesa-vulkan-drivers)")
 
 
@@ -212,7 +214,7 @@ def test_auto_falls_back_to_raster_with_one_warning(sim, monkeypatch):
     def no_vulkan(*args):
         raise RuntimeError("Vulkan must be available for GGUI")
 
-    monkeypatch.setattr(render, "_acquire_window", no_vulkan)
+    monkeypatch.setattr(render, "acquire_window", no_vulkan)
     monkeypatch.setattr(render, "_warned_no_ggui", False)
     first = FrameRenderer(sim, env=0, cell_px=CELL_PX, particles=False, backend="auto")
     with pytest.warns(RuntimeWarning, match="mesa-vulkan-drivers"):

@@ -157,7 +157,7 @@ def test_td3_and_iql_run_end_to_end(tmp_path):
 
 
 def test_auto_train_seeds_and_periodic_evaluation(tmp_path):
-    from roshan.runs.report import read_tensorboard_scalars
+    from roshan.runs.report.scalars import read_tensorboard_scalars
 
     res = cli("train", ROOT / "configs/fly_simple.yaml", "--root", tmp_path, "--name", "auto", "--quiet", *TINY,
               "--set", "train.max_updates=2", "--set", "train.auto_train=2", "--set", "train.seed=7",

@@ -1,0 +1,56 @@
+"""The process's one offscreen GGUI window (``ti.ui.Window``), shared by every GGUI frame renderer.
+
+Taichi 1.7 crashes (at ``destroy`` or at interpreter exit) when two GGUI windows are alive at once, so the
+process holds at most one: users of the same size share it, and a user of another size replaces it (about 0.2 s
+to open). The window is destroyed when its last user releases it.
+"""
+
+import taichi as ti
+from taichi.lang import impl
+
+WINDOW_TITLE = "ROSHAN-Taichi"
+# The runtime is kept (not its id) so a re-initialised Taichi can never look like the one the window belongs to.
+_shared: dict[str, object] = {"window": None, "res": None, "runtime": None, "users": 0}
+
+
+def _open_window(res: tuple[int, int]):
+    """A new offscreen GGUI window of ``res = (width, height)``; raises if GGUI/Vulkan is unavailable."""
+    window = ti.ui.Window(WINDOW_TITLE, res, show_window=False)
+    _shared.update(window=window, res=tuple(res), runtime=impl.get_runtime())
+    return window
+
+
+def _close_window() -> None:
+    if _shared["window"] is not None:
+        _shared["window"].destroy()
+    _shared.update(window=None, res=None, runtime=None)
+
+
+def acquire_window(res: tuple[int, int], held):
+    """The process's one GGUI window, sized ``res``; ``held`` is the window the caller already counts as a user of.
+
+    Replaces the window when the size differs or when Taichi was re-initialised since it was opened.
+    """
+    if _shared["res"] != tuple(res) or _shared["runtime"] is not impl.get_runtime():
+        _close_window()
+        _open_window(res)
+    if held is None:
+        _shared["users"] += 1
+    return _shared["window"]
+
+
+def release_window() -> None:
+    _shared["users"] = max(0, _shared["users"] - 1)
+    if _shared["users"] == 0:
+        _close_window()
+
+
+def ggui_available() -> bool:
+    """Whether an offscreen GGUI window can be opened in this process (opens the shared window if none is open)."""
+    if _shared["window"] is not None:
+        return True
+    try:
+        _open_window((16, 16))
+        return True
+    except Exception:  # any failure to open a window means no usable GGUI here
+        return False
