@@ -451,9 +451,10 @@ class EnvZeroFrames:
         return self._renderer.render(overlay=self._overlay)
 
     def close(self) -> None:
+        """Release the window claim but keep the renderer: its fields and kernels are reused when the env's
+        simulators are (roshan.kernels.pool), instead of allocating new ones at every env's first render."""
         if self._renderer is not None:
             self._renderer.close()
-            self._renderer = None
 
 
 def _arrow_geometry(height: int, width: int) -> tuple[float, float, float] | None:
