@@ -63,7 +63,7 @@ def ensure_taichi() -> str:
 
 # Taichi's LLVM backends (CPU, CUDA) hold at most 512 field trees per process and write past that limit
 # without a check (a segfault in a later kernel). Fields declared before a kernel launch become one tree when
-# it launches; one FlyVectorEnv makes 5 (a planner env more), and they stay until ti.reset(). Closed envs give
+# it launches; one FlyVectorEnv makes 6 (a planner env more), and they stay until ti.reset(). Closed envs give
 # their simulators to roshan.kernels.pool, so only envs alive at the same time (per build) hold trees.
 MAX_FIELD_TREES = 512
 TREE_HEADROOM = 32
