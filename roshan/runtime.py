@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 
 import taichi as ti
 
 ARCHES = ("cpu", "cuda", "vulkan", "auto")
 _current: dict[str, object] = {}
+_reset_hooks: list[Callable[[], None]] = []
 
 
 def init_taichi(arch: str = "cpu", threads: int | None = None, debug: bool = False) -> str:
@@ -31,6 +33,8 @@ def init_taichi(arch: str = "cpu", threads: int | None = None, debug: bool = Fal
     kwargs: dict[str, object] = {"debug": debug, "random_seed": 0, "log_level": ti.WARN}
     if threads is not None:
         kwargs["cpu_max_num_threads"] = threads
+    if _current:  # ti.init re-initialises: every field and kernel of the old runtime dies
+        _run_reset_hooks()
     if arch == "cpu":
         kwargs["arch"] = ti.cpu
     elif arch == "cuda":
@@ -59,7 +63,8 @@ def ensure_taichi() -> str:
 
 # Taichi's LLVM backends (CPU, CUDA) hold at most 512 field trees per process and write past that limit
 # without a check (a segfault in a later kernel). Fields declared before a kernel launch become one tree when
-# it launches; one FlyVectorEnv makes 5 (a planner env more), and they stay until ti.reset().
+# it launches; one FlyVectorEnv makes 6 (a planner env more), and they stay until ti.reset(). Closed envs give
+# their simulators to roshan.kernels.pool, so only envs alive at the same time (per build) hold trees.
 MAX_FIELD_TREES = 512
 TREE_HEADROOM = 32
 
@@ -77,8 +82,9 @@ def check_field_room(what: str) -> None:
     if used + TREE_HEADROOM > MAX_FIELD_TREES:
         raise RuntimeError(
             f"{what}: this process already holds {used} Taichi field trees (the CPU/CUDA backends allow "
-            f"{MAX_FIELD_TREES}, and envs keep theirs until Taichi is reset); build fewer simulators per process, "
-            "reuse envs with reset(), or call roshan.runtime.reset_taichi() once the old ones are no longer used")
+            f"{MAX_FIELD_TREES}, and live envs keep theirs until closed); close() envs you no longer use (closed "
+            "envs' simulators are reused by the next env of the same build), reuse envs with reset(), or call "
+            "roshan.runtime.reset_taichi() once the old ones are no longer used")
 
 
 def reset_taichi() -> None:
@@ -87,6 +93,18 @@ def reset_taichi() -> None:
     if current_arch() is not None:
         ti.reset()
     _current.clear()
+    _run_reset_hooks()
+
+
+def on_taichi_reset(hook: Callable[[], None]) -> None:
+    """Call ``hook`` whenever the Taichi runtime is reset or re-initialised (caches of Taichi objects, such as
+    the simulator pool of :mod:`roshan.kernels.pool`, must forget them then)."""
+    _reset_hooks.append(hook)
+
+
+def _run_reset_hooks() -> None:
+    for hook in _reset_hooks:
+        hook()
 
 
 def torch_device() -> str:

@@ -7,12 +7,9 @@ import torch
 from gymnasium.vector import AutoresetMode
 
 from roshan.config import Config, DroneConfig, FlyConfig
-from roshan.env.render import EnvZeroFrames
 from roshan.episode import EPISODE_FIELDS
 from roshan.kernels import observe
-from roshan.kernels.drones import DroneSim
-from roshan.kernels.fire import FireSim
-from roshan.kernels.fly import FlyKernels, time_limit
+from roshan.kernels.pool import take_fly_sims
 from roshan.maps import load_map
 from roshan.runtime import ensure_taichi, torch_device
 
@@ -52,12 +49,10 @@ class FlyVectorEnv(gym.vector.VectorEnv):
         self.render_mode = render_mode
         land = load_map(cfg.map.name, band=cfg.map.band or None, rows=cfg.map.uniform_rows,
                         cols=cfg.map.uniform_cols)
-        self.fire = FireSim(land, cfg.fire, cfg.wind, cfg.ignition, num_envs=num_envs,
-                            seed=cfg.sim.seed if seed is None else seed)
-        self.drones = DroneSim(self.fire, cfg.drones)
-        self.t_max = time_limit(land.rows, land.cols, land.cell_size, cfg.fire.dt, cfg.drones.max_speed,
-                                cfg.ignition.fire_percentage, self.fly_config)
-        self.kernels = FlyKernels(self.fire, self.drones, self.fly_config, self.t_max)
+        # pool: simulators of an earlier, closed env of this build if any (no new fields, no recompiling)
+        sims, self._give_back_sims = take_fly_sims(land, cfg, self.fly_config, num_envs,
+                                                   cfg.sim.seed if seed is None else seed, owner=self)
+        self.fire, self.drones, self.kernels, self.t_max = sims.fire, sims.drones, sims.kernels, sims.t_max
         self.num_envs = num_envs
         self.num_drones = n = cfg.drones.num_drones
         frames = self.fly_config.frames
@@ -76,7 +71,7 @@ class FlyVectorEnv(gym.vector.VectorEnv):
         # "episode_stats", not "episode": gymnasium's RecordEpisodeStatistics writes info["episode"] itself.
         self._info = {"final_obs": self._views(self._final_buf),
                       "episode_stats": {k: self._episode[:, i] for i, k in enumerate(EPISODE_FIELDS)}}
-        self._viewer = EnvZeroFrames(self.drones)
+        self._viewer = sims.viewer  # pool: pooled with the simulators
         self._has_reset = False
 
     def _define_spaces(self, num_envs: int, n: int, frames: int) -> None:
@@ -148,6 +143,7 @@ class FlyVectorEnv(gym.vector.VectorEnv):
 
     def close(self, **kwargs):
         self._viewer.close()
+        self._give_back_sims()  # pool: the simulators go back to the pool (idempotent)
 
     @property
     def drone_config(self) -> DroneConfig:

@@ -7,8 +7,6 @@ the actions, and since fire layouts and wind depend only on the env seed and the
 the heuristic evaluated with the same seed and number of envs play identical initial episodes.
 """
 
-from dataclasses import replace
-
 import gymnasium as gym
 import numpy as np
 import torch
@@ -17,14 +15,10 @@ from gymnasium.vector import AutoresetMode
 from roshan.algos.frozen import FrozenFlyPolicy
 from roshan.config import CONTROLLERS, Config, PlannerConfig
 from roshan.env.fly import fly_obs_views
-from roshan.env.render import EnvZeroFrames
 from roshan.episode import EPISODE_FIELDS
 from roshan.kernels import observe
-from roshan.kernels.drones import DroneSim
-from roshan.kernels.explore import ExploreMaps
-from roshan.kernels.fire import FireSim
-from roshan.kernels.planner import PlannerKernels, obs_layout, planner_time_limit
-from roshan.kernels.rewards import PlannerCoefficients
+from roshan.kernels.planner import obs_layout
+from roshan.kernels.pool import take_planner_sims
 from roshan.maps import load_map
 from roshan.runtime import ensure_taichi, torch_device
 
@@ -73,24 +67,13 @@ class PlannerVectorEnv(gym.vector.VectorEnv):
             self.explorer_policy = explorer_policy or FrozenFlyPolicy(pc.explorer_model, torch_device())
         land = load_map(cfg.map.name, band=cfg.map.band or None, rows=cfg.map.uniform_rows,
                         cols=cfg.map.uniform_cols)
-        self.fire = FireSim(land, cfg.fire, cfg.wind, cfg.ignition, num_envs=num_envs,
-                            seed=cfg.sim.seed if seed is None else seed)
-        self.drones = DroneSim(self.fire, cfg.drones)
-        explorer_cfg = replace(cfg.drones, num_drones=pc.num_explorers, max_speed=pc.explorer_speed,
-                               view_range=pc.explorer_view_range)
-        self.explorers = DroneSim(self.fire, explorer_cfg)
-        self.maps = ExploreMaps(self.fire, self.explorers, pc.num_explorers, pc.explorer_view_range,
-                                version=pc.meander, index_bound=pc.explorer_index_bound)
-        self.t_max = planner_time_limit(land.rows, land.cols, land.cell_size, cfg.fire.dt, cfg.drones.max_speed,
-                                        cfg.ignition.fire_percentage, pc.time_limit)
-        self.max_candidates = pc.max_candidates or land.rows * land.cols + 1
-        fires = pc.eval_fires if evaluation else pc.train_fires
-        self.kernels = PlannerKernels(
-            self.fire, self.drones, self.explorers, self.maps, interval=pc.interval, t_max=self.t_max,
-            coef=PlannerCoefficients.resolve(pc.rewards), greedy=controller == "greedy",
-            move_explorers=move_explorers, detected=fires == "detected" or controller == "greedy",
-            burnout=pc.burnout, max_candidates=self.max_candidates, fly_frames=self.fly_policy.frames,
-            explore_frames=self.explorer_policy.frames if self.explorer_policy else 1)
+        # pool: simulators of an earlier, closed env of this build if any (no new fields, no recompiling)
+        sims, self._give_back_sims = take_planner_sims(
+            land, cfg, pc, num_envs, cfg.sim.seed if seed is None else seed, controller=controller,
+            evaluation=evaluation, fly_frames=self.fly_policy.frames,
+            explore_frames=self.explorer_policy.frames if self.explorer_policy else 1, owner=self)
+        self.fire, self.drones, self.explorers, self.maps = sims.fire, sims.drones, sims.explorers, sims.maps
+        self.kernels, self.t_max, self.max_candidates = sims.kernels, sims.t_max, sims.max_candidates
         self.num_envs = num_envs
         self.num_drones = n = cfg.drones.num_drones
         self.interval = pc.interval
@@ -115,7 +98,7 @@ class PlannerVectorEnv(gym.vector.VectorEnv):
         self.terminations, self.truncations = done_bool[:, 0], done_bool[:, 1]
         self._info = {"final_obs": self._views(self._final_buf),
                       "episode_stats": {k: self._episode[:, i] for i, k in enumerate(EPISODE_FIELDS)}}
-        self._viewer = EnvZeroFrames(self.drones)
+        self._viewer = sims.viewer  # pool: pooled with the simulators
         self._has_reset = False
 
     def _define_spaces(self, num_envs: int, n: int) -> None:
@@ -213,3 +196,4 @@ class PlannerVectorEnv(gym.vector.VectorEnv):
 
     def close(self, **kwargs):
         self._viewer.close()
+        self._give_back_sims()  # pool: the simulators go back to the pool (idempotent)

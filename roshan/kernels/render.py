@@ -436,6 +436,28 @@ def _env_index(env: int, num_envs: int) -> int:
     return int(env)
 
 
+class EnvZeroFrames:
+    """``render()`` of the vector envs: env 0's land cover, fire and drones through the raster backend, built on
+    the first call (rendering is optional, and the renderer compiles kernels)."""
+
+    def __init__(self, drones):
+        self.drones = drones
+        self._renderer: FrameRenderer | None = None
+        self._overlay: DroneOverlay | None = None
+
+    def render(self) -> np.ndarray:
+        if self._renderer is None:
+            self._renderer = FrameRenderer(self.drones.fire, backend="raster")
+            self._overlay = drone_overlay(self.drones)
+        return self._renderer.render(overlay=self._overlay)
+
+    def close(self) -> None:
+        """Release the window claim but keep the renderer: its fields and kernels are reused when the env's
+        simulators are (roshan.kernels.pool), instead of allocating new ones at every env's first render."""
+        if self._renderer is not None:
+            self._renderer.close()
+
+
 def _arrow_geometry(height: int, width: int) -> tuple[float, float, float] | None:
     """(centre row, centre column, radius) of the wind arrow's disc in the top-right corner; None if too small."""
     radius = min(28.0, max(6.0, 0.05 * min(height, width)))
