@@ -94,6 +94,10 @@ class FlyVectorEnv(gym.vector.VectorEnv):
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, num_envs)
         self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)
 
+    def _kernel_obs(self):
+        flat = self._obs_buf.view(self.num_envs, -1)
+        return flat, self._final_buf.view(self.num_envs, -1), self._obs_buf, self._obs_buf
+
     def _views(self, buf: torch.Tensor) -> dict[str, torch.Tensor]:
         return fly_obs_views(buf, self.num_drones)
 
@@ -105,7 +109,7 @@ class FlyVectorEnv(gym.vector.VectorEnv):
         if seed is not None:
             self.fire.seed = int(seed)
             self.fire.episode.fill(-1)
-        self.kernels.reset_all(self._obs_buf, self._final_buf, self.fire.seed_key)
+        self.kernels.reset_all(*self._kernel_obs(), self.fire.seed_key)
         self._episode.zero_()
         self._dones.zero_()
         self._has_reset = True
@@ -121,7 +125,7 @@ class FlyVectorEnv(gym.vector.VectorEnv):
         # On the CPU, reading the done flags costs microseconds and saves the reset launch (~150 us) in the
         # many steps where no episode ends; on a GPU that read would synchronise, so always launch.
         if self.device.type != "cpu" or bool(self._dones.any()):
-            k.restart(self._obs_buf, self._final_buf, self.fire.seed_key, 1)
+            k.restart(*self._kernel_obs(), self.fire.seed_key, 1)
         info = dict(self._info)
         info["_episode_stats"] = self.terminations | self.truncations
         info["_final_obs"] = info["_episode_stats"]

@@ -147,8 +147,7 @@ class PlannerVectorEnv(gym.vector.VectorEnv):
             self.fire.seed = int(seed)
             self.fire.episode.fill(-1)
         k = self.kernels
-        k.ended.fill(1)
-        k.restart(self._obs_buf, self._final_buf, self._fly_buf, self._explore_buf, self.fire.seed_key, 0)
+        k.reset_all(self._obs_buf, self._final_buf, self._fly_buf, self._explore_buf, self.fire.seed_key)
         self._episode.zero_()
         self._dones.zero_()
         self._has_reset = True
