@@ -5,7 +5,9 @@ One planner step of env e is ``apply`` (the chosen candidates become the drones'
 ``low_step`` (the fire, the explorers and the planner drones each advance once; the env's Python side runs the
 frozen FlyAgent policies in between), then ``finish`` (reward, termination, a fresh observation). With the
 greedy controller (the heuristic baseline of agents.md 10.2) ``apply`` is skipped, the drones pick their own
-goals inside ``low_step`` and an episode may end at any low-level step.
+goals inside ``low_step`` and an episode may end at any low-level step. The low-level drone step and its goal
+rules are the FlyAgent level's (:class:`roshan.kernels.tasks.GoalRules`); this module adds the decisions,
+the planner rewards and termination on top.
 
 Deliberate differences from the reference (agents.md 13.1, 13.5):
 - the observation is built after the interval from the state it ends in (the reference shows the planner the
@@ -69,7 +71,7 @@ class PlannerKernels(EpisodeKernels):
         maps: the fire map and meander waypoints (its drone group is ``explorers``).
         interval: low-level steps per planner step (``hierarchy_timesteps``).
         t_max: low-level step limit of an episode.
-        coef: :class:`roshan.env.rewards.PlannerCoefficients`.
+        coef: :class:`roshan.kernels.rewards.PlannerCoefficients`.
         greedy: the drones follow the heuristic state machine (agents.md 10.2) instead of planner goals.
         move_explorers: step the explorers (evaluation); in planner training they stay at the groundstation.
         detected: the candidates are the fire map's cells (fires some drone has seen) instead of all burning
