@@ -187,14 +187,20 @@ def _light_scattered(sim: ti.template(), e, n_fires):
     if available < n_fires:
         sim.report_ignition_short(e, n_fires - available)
     else:
-        lit = 0
-        for _ in range(MAX_SCATTER_TRIES):
-            if lit >= n_fires:
-                break
-            c = _random_cell(sim, e)
-            if sim.can_ignite(e, c) != 0:
-                sim.ignite(e, c)
-                lit += 1
+        _scatter(sim, e, 0, n_fires, MAX_SCATTER_TRIES)
+
+
+@ti.func
+def _scatter(sim: ti.template(), e, lit, n_fires, tries: ti.template()):
+    """Light random ignitable cells until ``n_fires`` are lit (``lit`` already are) or ``tries`` draws are spent."""
+    n = lit
+    for _ in range(tries):
+        if n >= n_fires:
+            break
+        c = _random_cell(sim, e)
+        if sim.can_ignite(e, c) != 0:
+            sim.ignite(e, c)
+            n += 1
 
 
 @ti.func
@@ -234,10 +240,4 @@ def _light_ring(sim: ti.template(), e, n_fires):
             sim.exposed[e, pick] = sim.exposed[e, k]
             sim.ignite(e, c)
             lit += 1
-    for _ in range(MAX_RING_FILL_TRIES):
-        if lit >= n_fires:
-            break
-        c = _random_cell(sim, e)
-        if sim.can_ignite(e, c) != 0:
-            sim.ignite(e, c)
-            lit += 1
+    _scatter(sim, e, lit, n_fires, MAX_RING_FILL_TRIES)
