@@ -1,17 +1,15 @@
 """FlyAgent vector environment: the Gymnasium face of :class:`roshan.kernels.fly.FlyKernels` (E fire maps with N
-drones each, stepped by one kernel launch, same-step autoreset in a second one)."""
+drones each, stepped by one kernel launch, same-step autoreset in a second one), a layer on
+:class:`roshan.env.base.VectorEnvCore`."""
 
 import gymnasium as gym
 import numpy as np
 import torch
-from gymnasium.vector import AutoresetMode
 
 from roshan.config import Config, DroneConfig, FlyConfig
-from roshan.episode import EPISODE_FIELDS
+from roshan.env.base import VectorEnvCore
 from roshan.kernels import observe
 from roshan.kernels.pool import take_fly_sims
-from roshan.maps import load_map
-from roshan.runtime import ensure_taichi, torch_device
 
 
 def fly_obs_views(buf: torch.Tensor, num_drones: int) -> dict[str, torch.Tensor]:
@@ -21,7 +19,7 @@ def fly_obs_views(buf: torch.Tensor, num_drones: int) -> dict[str, torch.Tensor]
             "neighbors_mask": buf[..., k + 4 * n:]}
 
 
-class FlyVectorEnv(gym.vector.VectorEnv):
+class FlyVectorEnv(VectorEnvCore):
     """E FlyAgent environments as one Gymnasium vector env whose tensors are shared with torch.
 
     Observations are a dict of torch views into one buffer: ``agent`` (E, N, T, 9), ``neighbors``
@@ -39,42 +37,18 @@ class FlyVectorEnv(gym.vector.VectorEnv):
     readable as :attr:`water`.
     """
 
-    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": ["rgb_array"]}
-
     def __init__(self, num_envs: int = 1, config: Config | None = None, fly: FlyConfig | None = None,
                  render_mode: str | None = None, seed: int | None = None):
-        ensure_taichi()
-        cfg = config or Config()
-        self.config, self.fly_config = cfg, fly or FlyConfig()
-        self.render_mode = render_mode
-        land = load_map(cfg.map.name, band=cfg.map.band or None, rows=cfg.map.uniform_rows,
-                        cols=cfg.map.uniform_cols)
-        # pool: simulators of an earlier, closed env of this build if any (no new fields, no recompiling)
-        sims, self._give_back_sims = take_fly_sims(land, cfg, self.fly_config, num_envs,
-                                                   cfg.sim.seed if seed is None else seed, owner=self)
-        self.fire, self.drones, self.kernels, self.t_max = sims.fire, sims.drones, sims.kernels, sims.t_max
-        self.num_envs = num_envs
-        self.num_drones = n = cfg.drones.num_drones
-        frames = self.fly_config.frames
-        self.device = torch.device(torch_device())
-        self._define_spaces(num_envs, n, frames)
-        width = observe.frame_width(n)
-        dev = self.device
-        self._obs_buf = torch.zeros((num_envs, n, frames, width), dtype=torch.float32, device=dev)
-        self._final_buf = torch.zeros_like(self._obs_buf)
-        self._rewards = torch.zeros((num_envs, n), dtype=torch.float32, device=dev)
-        self._dones = torch.zeros((num_envs, 2), dtype=torch.uint8, device=dev)
-        self._episode = torch.zeros((num_envs, len(EPISODE_FIELDS)), dtype=torch.float32, device=dev)
-        self._obs = self._views(self._obs_buf)
-        done_bool = self._dones.view(torch.bool)
-        self.terminations, self.truncations = done_bool[:, 0], done_bool[:, 1]
-        # "episode_stats", not "episode": gymnasium's RecordEpisodeStatistics writes info["episode"] itself.
-        self._info = {"final_obs": self._views(self._final_buf),
-                      "episode_stats": {k: self._episode[:, i] for i, k in enumerate(EPISODE_FIELDS)}}
-        self._viewer = sims.viewer  # pool: pooled with the simulators
-        self._has_reset = False
+        self.fly_config = fly or FlyConfig()
+        super().__init__(num_envs, config, seed, render_mode)
+        n, frames = self.num_drones, self.fly_config.frames
+        self._define_spaces(n, frames)
+        self._allocate_buffers((n, frames, observe.frame_width(n)), (n,))
 
-    def _define_spaces(self, num_envs: int, n: int, frames: int) -> None:
+    def _take_simulators(self, land, seed):
+        return take_fly_sims(land, self.config, self.fly_config, self.num_envs, seed, owner=self)
+
+    def _define_spaces(self, n: int, frames: int) -> None:
         box = gym.spaces.Box
         # Every feature is clipped to [-1, 1] except the drone id (0..N-1, fed raw as in the reference).
         low = np.full((n, frames, observe.OWN_FEATURES), -1.0, np.float32)
@@ -86,64 +60,27 @@ class FlyVectorEnv(gym.vector.VectorEnv):
             "neighbors_mask": box(0.0, 1.0, (n, frames, n), np.float32),
         })
         self.single_action_space = box(-1.0, 1.0, (n, 2), np.float32)
-        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, num_envs)
-        self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)
+        self._batched_spaces()
 
     def _views(self, buf: torch.Tensor) -> dict[str, torch.Tensor]:
         return fly_obs_views(buf, self.num_drones)
 
-    # ------------------------------------------------------------------------------------------ gymnasium
+    def _kernel_obs(self):
+        # The observation is the frame stack itself; no explorers (the second stack is never touched).
+        E = self.num_envs
+        return self._obs_buf.view(E, -1), self._final_buf.view(E, -1), self._obs_buf, self._obs_buf
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        """Start new episodes in every env; ``seed`` restarts every random stream from that seed."""
-        super().reset(seed=seed)
-        if seed is not None:
-            self.fire.seed = int(seed)
-            self.fire.episode.fill(-1)
-        self.kernels.reset_all(self._obs_buf, self._final_buf, self.fire.seed_key)
-        self._episode.zero_()
-        self._dones.zero_()
-        self._has_reset = True
-        return self._obs, {}
-
-    def step(self, actions):
-        """Advance every env by one FlyAgent step; envs that end are reset in the same call."""
-        if not self._has_reset:
-            raise gym.error.ResetNeeded("FlyVectorEnv.step() before reset(): call reset() first")
-        a = self._check_actions(actions)
-        k = self.kernels
-        k.step(a, self._obs_buf, self._rewards, self._dones, self._episode)
-        # On the CPU, reading the done flags costs microseconds and saves the reset launch (~150 us) in the
-        # many steps where no episode ends; on a GPU that read would synchronise, so always launch.
-        if self.device.type != "cpu" or bool(self._dones.any()):
-            k.restart(self._obs_buf, self._final_buf, self.fire.seed_key, 1)
-        info = dict(self._info)
-        info["_episode_stats"] = self.terminations | self.truncations
-        info["_final_obs"] = info["_episode_stats"]
-        return self._obs, self._rewards, self.terminations, self.truncations, info
+    def _advance(self, actions) -> None:
+        self.kernels.step(self._check_actions(actions), self._obs_buf, self._rewards, self._dones, self._episode)
 
     def _check_actions(self, actions) -> torch.Tensor:
-        want = (self.num_envs, self.num_drones, 2)
-        if isinstance(actions, np.ndarray):
-            actions = torch.from_numpy(actions)
-        elif not isinstance(actions, torch.Tensor):
-            actions = torch.as_tensor(np.asarray(actions))
-        if tuple(actions.shape) != want:
-            raise ValueError(f"actions: expected shape {want} (envs, drones, 2), got {tuple(actions.shape)}")
+        actions = self._actions_tensor(actions, (self.num_envs, self.num_drones, 2), "envs, drones, 2")
         a = actions.to(device=self.device, dtype=torch.float32).contiguous()
         finite = torch.isfinite(a)
         if not bool(finite.all()):
             e, d, _ = (~finite).nonzero()[0].tolist()
             raise ValueError(f"actions: non-finite value {a[e, d].tolist()} for env {e}, drone {d}")
         return a
-
-    def render(self):
-        """An RGB frame (H, W, 3) uint8 of env 0: land cover, fire, particles, drones, goals, groundstation."""
-        return self._viewer.render()
-
-    def close(self, **kwargs):
-        self._viewer.close()
-        self._give_back_sims()  # pool: the simulators go back to the pool (idempotent)
 
     @property
     def drone_config(self) -> DroneConfig:

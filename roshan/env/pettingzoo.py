@@ -14,7 +14,7 @@ from pettingzoo import ParallelEnv
 
 from roshan.config import Config, FlyConfig
 from roshan.env.fly import FlyVectorEnv
-from roshan.env.single import EPISODE_KEY, _check_render_mode, _FlyCore, build_configs
+from roshan.env.single import EPISODE_KEY, _FlyCore
 
 
 def _drop_first_axis(space: gym.spaces.Box) -> gym.spaces.Box:
@@ -46,11 +46,9 @@ class FlyParallelEnv(ParallelEnv):
     def __init__(self, config: Config | None = None, fly: FlyConfig | None = None, render_mode: str | None = None,
                  *, map_name: str | None = None, num_drones: int | None = None, policy: str | None = None,
                  collision: bool | None = None):
-        _check_render_mode(render_mode, self.metadata["render_modes"])
-        cfg, task = build_configs(config, fly, map_name=map_name, num_drones=num_drones, policy=policy,
-                                  collision=collision)
+        self._core = _FlyCore(config, fly, render_mode, self.metadata["render_modes"], map_name=map_name,
+                              num_drones=num_drones, policy=policy, collision=collision)
         self.render_mode = render_mode
-        self._core = _FlyCore(cfg, task, render_mode)
         self.possible_agents = [f"drone_{i}" for i in range(self._core.num_drones)]
         self.agents: list[str] = []
         single = self._core.vec.single_observation_space

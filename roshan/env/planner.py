@@ -10,20 +10,18 @@ the heuristic evaluated with the same seed and number of envs play identical ini
 import gymnasium as gym
 import numpy as np
 import torch
-from gymnasium.vector import AutoresetMode
 
 from roshan.algos.frozen import FrozenFlyPolicy
 from roshan.config import CONTROLLERS, Config, PlannerConfig
+from roshan.env.base import VectorEnvCore
 from roshan.env.fly import fly_obs_views
-from roshan.episode import EPISODE_FIELDS
 from roshan.kernels import observe
 from roshan.kernels.planner import obs_layout
 from roshan.kernels.pool import take_planner_sims
-from roshan.maps import load_map
 from roshan.runtime import ensure_taichi, torch_device
 
 
-class PlannerVectorEnv(gym.vector.VectorEnv):
+class PlannerVectorEnv(VectorEnvCore):
     """E planner environments as one Gymnasium vector env whose tensors are shared with torch.
 
     Observation: a dict of torch views into one (E, W) buffer: ``drones`` (E, N, 2), ``goals`` (E, N, 2),
@@ -46,8 +44,8 @@ class PlannerVectorEnv(gym.vector.VectorEnv):
             ``planner.explorer_model``).
     """
 
-    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": ["rgb_array"]}
-    is_planner = True  # actions are per-env candidate indices, not per-drone velocities
+    flat_drones = False  # one decision per env: (E, N) candidate indices
+    failure_reasons = VectorEnvCore.failure_reasons + ("burnout",)
 
     def __init__(self, num_envs: int = 1, config: Config | None = None, planner: PlannerConfig | None = None,
                  evaluation: bool = False, controller: str = "planner", seed: int | None = None,
@@ -55,53 +53,36 @@ class PlannerVectorEnv(gym.vector.VectorEnv):
                  render_mode: str | None = None):
         if controller not in CONTROLLERS:
             raise ValueError(f"controller must be one of {', '.join(CONTROLLERS)}, got {controller!r}")
-        ensure_taichi()
-        cfg = config or Config()
-        pc = planner or PlannerConfig()
-        self.config, self.planner_config, self.controller = cfg, pc, controller
-        self.evaluation, self.render_mode = evaluation, render_mode
+        self.planner_config = pc = planner or PlannerConfig()
+        self.controller, self.evaluation = controller, evaluation
+        ensure_taichi()  # the frozen policies act on the simulator's torch device
         self.fly_policy = fly_policy or FrozenFlyPolicy(pc.fly_model, torch_device())
-        move_explorers = evaluation or controller == "greedy"
         self.explorer_policy = None
-        if move_explorers:
+        if evaluation or controller == "greedy":  # in planner training the explorers wait at the groundstation
             self.explorer_policy = explorer_policy or FrozenFlyPolicy(pc.explorer_model, torch_device())
-        land = load_map(cfg.map.name, band=cfg.map.band or None, rows=cfg.map.uniform_rows,
-                        cols=cfg.map.uniform_cols)
-        # pool: simulators of an earlier, closed env of this build if any (no new fields, no recompiling)
-        sims, self._give_back_sims = take_planner_sims(
-            land, cfg, pc, num_envs, cfg.sim.seed if seed is None else seed, controller=controller,
-            evaluation=evaluation, fly_frames=self.fly_policy.frames,
-            explore_frames=self.explorer_policy.frames if self.explorer_policy else 1, owner=self)
-        self.fire, self.drones, self.explorers, self.maps = sims.fire, sims.drones, sims.explorers, sims.maps
-        self.kernels, self.t_max, self.max_candidates = sims.kernels, sims.t_max, sims.max_candidates
-        self.num_envs = num_envs
-        self.num_drones = n = cfg.drones.num_drones
-        self.interval = pc.interval
-        self.device = dev = torch.device(torch_device())
-        self._define_spaces(num_envs, n)
-        self.layout = obs_layout(n, self.max_candidates)
-        width = max(end for _, end in self.layout.values())
-        self._obs_buf = torch.zeros((num_envs, width), dtype=torch.float32, device=dev)
-        self._final_buf = torch.zeros_like(self._obs_buf)
-        m = pc.num_explorers
-        self._fly_buf = torch.zeros((num_envs, n, self.fly_policy.frames, observe.frame_width(n)), device=dev)
         ex_frames = self.explorer_policy.frames if self.explorer_policy else 1
+        super().__init__(num_envs, config, seed, render_mode)
+        n, m = self.num_drones, pc.num_explorers
+        self.interval = pc.interval
+        self._define_spaces(n)
+        self.layout = obs_layout(n, self.max_candidates)
+        self._allocate_buffers((max(end for _, end in self.layout.values()),), ())
+        dev = self.device
+        self._fly_buf = torch.zeros((num_envs, n, self.fly_policy.frames, observe.frame_width(n)), device=dev)
         self._explore_buf = torch.zeros((num_envs, m, ex_frames, observe.frame_width(m)), device=dev)
         self._fly_obs = fly_obs_views(self._fly_buf, n)
         self._explore_obs = fly_obs_views(self._explore_buf, m)
         self._explore_actions = torch.zeros((num_envs, m, 2), device=dev)
-        self._rewards = torch.zeros(num_envs, dtype=torch.float32, device=dev)
-        self._dones = torch.zeros((num_envs, 2), dtype=torch.uint8, device=dev)
-        self._episode = torch.zeros((num_envs, len(EPISODE_FIELDS)), dtype=torch.float32, device=dev)
-        self._obs = self._views(self._obs_buf)
-        done_bool = self._dones.view(torch.bool)
-        self.terminations, self.truncations = done_bool[:, 0], done_bool[:, 1]
-        self._info = {"final_obs": self._views(self._final_buf),
-                      "episode_stats": {k: self._episode[:, i] for i, k in enumerate(EPISODE_FIELDS)}}
-        self._viewer = sims.viewer  # pool: pooled with the simulators
-        self._has_reset = False
 
-    def _define_spaces(self, num_envs: int, n: int) -> None:
+    def _take_simulators(self, land, seed):
+        explore_frames = self.explorer_policy.frames if self.explorer_policy else 1
+        sims, give_back = take_planner_sims(
+            land, self.config, self.planner_config, self.num_envs, seed, controller=self.controller,
+            evaluation=self.evaluation, fly_frames=self.fly_policy.frames, explore_frames=explore_frames, owner=self)
+        self.explorers, self.maps, self.max_candidates = sims.explorers, sims.maps, sims.max_candidates
+        return sims, give_back
+
+    def _define_spaces(self, n: int) -> None:
         box, k = gym.spaces.Box, self.max_candidates
         self.single_observation_space = gym.spaces.Dict({
             "drones": box(-np.inf, np.inf, (n, 2), np.float32),  # outside [-1, 1] when a drone leaves the map
@@ -112,8 +93,7 @@ class PlannerVectorEnv(gym.vector.VectorEnv):
             "globals": box(-2.0, 1.0, (5,), np.float32),
         })
         self.single_action_space = gym.spaces.MultiDiscrete(np.full(n, k))
-        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, num_envs)
-        self.action_space = gym.vector.utils.batch_space(self.single_action_space, num_envs)
+        self._batched_spaces()
 
     def _views(self, buf: torch.Tensor) -> dict[str, torch.Tensor]:
         n, k = self.num_drones, self.max_candidates
@@ -121,28 +101,11 @@ class PlannerVectorEnv(gym.vector.VectorEnv):
                   "globals": (5,)}
         return {name: buf[:, a:b].unflatten(1, shapes[name]) for name, (a, b) in self.layout.items()}
 
-    # ------------------------------------------------------------------------------------------ gymnasium
+    def _kernel_obs(self):
+        return self._obs_buf, self._final_buf, self._fly_buf, self._explore_buf
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        """Start new episodes in every env; ``seed`` restarts every random stream from that seed."""
-        super().reset(seed=seed)
-        if seed is not None:
-            self.fire.seed = int(seed)
-            self.fire.episode.fill(-1)
-        k = self.kernels
-        k.ended.fill(1)
-        k.restart(self._obs_buf, self._final_buf, self._fly_buf, self._explore_buf, self.fire.seed_key, 0)
-        self._episode.zero_()
-        self._dones.zero_()
-        self._has_reset = True
-        return self._obs, {}
-
-    @torch.no_grad()
-    def step(self, actions):
-        """One planner decision: set the goals, fly ``interval`` low-level steps, reward, observe; envs that end
-        are reset in the same call."""
-        if not self._has_reset:
-            raise gym.error.ResetNeeded("PlannerVectorEnv.step() before reset(): call reset() first")
+    def _advance(self, actions) -> None:
+        """One planner decision: set the goals, fly ``interval`` low-level steps, reward, observe."""
         k = self.kernels
         k.begin(self._rewards, self._dones)
         if self.controller == "planner":
@@ -154,21 +117,9 @@ class PlannerVectorEnv(gym.vector.VectorEnv):
             k.low_step(fly_actions, self._explore_actions, self._fly_buf, self._explore_buf, self._rewards,
                        self._dones, self._episode)
         k.finish(self._obs_buf, self._rewards, self._dones, self._episode)
-        if self.device.type != "cpu" or bool(self._dones.any()):
-            k.restart(self._obs_buf, self._final_buf, self._fly_buf, self._explore_buf, self.fire.seed_key, 1)
-        info = dict(self._info)
-        info["_episode_stats"] = self.terminations | self.truncations
-        info["_final_obs"] = info["_episode_stats"]
-        return self._obs, self._rewards, self.terminations, self.truncations, info
 
     def _check_actions(self, actions) -> torch.Tensor:
-        want = (self.num_envs, self.num_drones)
-        if isinstance(actions, np.ndarray):
-            actions = torch.from_numpy(actions)
-        elif not isinstance(actions, torch.Tensor):
-            actions = torch.as_tensor(np.asarray(actions))
-        if tuple(actions.shape) != want:
-            raise ValueError(f"actions: expected shape {want} (envs, drones), got {tuple(actions.shape)}")
+        actions = self._actions_tensor(actions, (self.num_envs, self.num_drones), "envs, drones")
         if actions.is_floating_point() or actions.is_complex():
             raise ValueError(f"actions: expected integer candidate indices, got dtype {actions.dtype}")
         a = actions.to(device=self.device, dtype=torch.int64).contiguous()
@@ -189,11 +140,3 @@ class PlannerVectorEnv(gym.vector.VectorEnv):
     def goals(self) -> np.ndarray:
         """(E, N, 2) current drone goals in grid units (a copy; tests, rendering)."""
         return self.drones.goal.to_numpy()
-
-    def render(self):
-        """An RGB frame (H, W, 3) uint8 of env 0: land cover, fire, drones with their goals, explorers."""
-        return self._viewer.render()
-
-    def close(self, **kwargs):
-        self._viewer.close()
-        self._give_back_sims()  # pool: the simulators go back to the pool (idempotent)

@@ -61,8 +61,12 @@ class _FlyCore:
     Observations come back as numpy copies of env 0 because the vector env overwrites its tensors in place.
     """
 
-    def __init__(self, config: Config, fly: FlyConfig, render_mode: str | None):
-        self.vec = FlyVectorEnv(num_envs=1, config=config, fly=fly, render_mode=render_mode)
+    def __init__(self, config: Config | None, fly: FlyConfig | None, render_mode: str | None,
+                 render_modes: list[str], **shortcuts):
+        """``render_modes``: the front end's; ``shortcuts``: :func:`build_configs`' keywords."""
+        _check_render_mode(render_mode, render_modes)
+        cfg, task = build_configs(config, fly, **shortcuts)
+        self.vec = FlyVectorEnv(num_envs=1, config=cfg, fly=task, render_mode=render_mode)
         self.num_drones = self.vec.num_drones
         self._obs: dict | None = None  # the vector env's live observation views (None before the first reset)
         self.ended = False  # the last step ended the episode; the vector env has already started the next one
@@ -117,7 +121,7 @@ class FlyEnv(gym.Env):
 
     The reward is the mean of the drones' rewards (a float); the per-drone rewards are in ``info["rewards"]``
     (numpy (N,)). A step that ends the episode returns the terminal observation, and its info holds
-    ``info["episode_record"]``: success (1.0/0.0), reason (a name from :data:`roshan.kernels.episode.REASONS`),
+    ``info["episode_record"]``: success (1.0/0.0), reason (a name from :data:`roshan.episode.REASONS`),
     steps (int), burned_fraction, extinguished and return (the mean-over-drones return). A timeout
     truncates; every other end terminates.
 
@@ -140,13 +144,11 @@ class FlyEnv(gym.Env):
     def __init__(self, config: Config | None = None, fly: FlyConfig | None = None, render_mode: str | None = None,
                  *, map_name: str | None = None, num_drones: int | None = None, policy: str | None = None,
                  collision: bool | None = None):
-        _check_render_mode(render_mode, self.metadata["render_modes"])
-        cfg, task = build_configs(config, fly, map_name=map_name, num_drones=num_drones, policy=policy,
-                                  collision=collision)
+        self._core = _FlyCore(config, fly, render_mode, self.metadata["render_modes"], map_name=map_name,
+                              num_drones=num_drones, policy=policy, collision=collision)
         self.render_mode = render_mode
-        self._core = _FlyCore(cfg, task, render_mode)
         # One step is one fire time step, so real time plays at 1 / dt steps per second.
-        self.metadata = {**FlyEnv.metadata, "render_fps": max(1, round(1.0 / cfg.fire.dt))}
+        self.metadata = {**FlyEnv.metadata, "render_fps": max(1, round(1.0 / self._core.vec.config.fire.dt))}
         self.observation_space = self._core.vec.single_observation_space
         self.action_space = self._core.vec.single_action_space
 

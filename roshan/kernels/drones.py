@@ -13,7 +13,7 @@ import numpy as np
 import taichi as ti
 
 from roshan.config import DroneConfig
-from roshan.kernels import rng
+from roshan.kernels import rng, tasks
 from roshan.kernels.fire import FireSim
 
 BIN = 0.05  # action resolution with use_vel_bins: 41 levels in [-1, 1]
@@ -76,12 +76,13 @@ class DroneSim:
         self.refilling = ti.field(ti.i32, (E, N))  # complex policy: flying home because the tank ran empty
         self.water.fill(cfg.water_capacity)
         self._all = np.ones(E, dtype=np.int32)
+        self._burning = tasks.BurningCells(fire)  # assign_fire_goals' candidates
 
     # ------------------------------------------------------------------------------------------ public API
 
     def reset(self, mask=None) -> None:
         """Place the groundstation and the drones of the masked envs (call after the fire's reset)."""
-        mask = self._all if mask is None else FireSim._int32(mask, (self.num_envs,), "reset mask")
+        mask = self._all if mask is None else FireSim.int32_array(mask, (self.num_envs,), "reset mask")
         self._reset(mask)
 
     def move(self, actions) -> None:
@@ -127,7 +128,7 @@ class DroneSim:
     def _assign_fire_goals(self):
         for e in range(self.num_envs):
             for d in range(self.num_drones):
-                self.next_fire(e, d)
+                tasks.take_cell(self, e, d, tasks.nearest_free_cell(self, self._burning, e, d))
 
     @ti.kernel
     def _restart_progress(self):
@@ -268,35 +269,16 @@ class DroneSim:
         return c
 
     @ti.func
-    def next_fire(self, e, d):
-        """agents.md 10.1: reserve the nearest burning cell no other drone holds; else the groundstation.
+    def cell_centre(self, c):
+        """Grid coordinates (row, col) of the centre of flat cell c."""
+        return ti.Vector([ti.cast(c // self.cols, ti.f32), ti.cast(c % self.cols, ti.f32)]) + 0.5
 
-        Distances are squared index distances from the drone's integer cell; the first of equals wins.
-        A reservation counts only while its cell burns, because candidates are burning cells.
-        """
-        p = self.pos[e, d] / self.cell
-        pi = ti.floor(p[0])
-        pj = ti.floor(p[1])
-        best = -1
-        best_d2 = 0.0
-        for k in range(self.fire.counts[e, 0]):  # N_BURNING
-            c = self.fire.burning[e, k]
-            free = 1
-            for other in range(self.num_drones):
-                if other != d and self.goal_cell[e, other] == c:
-                    free = 0
-            if free != 0:
-                di = ti.cast(c // self.cols, ti.f32) - pi
-                dj = ti.cast(c % self.cols, ti.f32) - pj
-                d2 = di * di + dj * dj
-                if best < 0 or d2 < best_d2:
-                    best = c
-                    best_d2 = d2
-        self.goal_cell[e, d] = best
-        goal = self.groundstation_centre(e)
-        if best >= 0:
-            goal = ti.Vector([ti.cast(best // self.cols, ti.f32), ti.cast(best % self.cols, ti.f32)]) + 0.5
-        self.goal[e, d] = goal
+    @ti.func
+    def heads_home(self, e, d) -> ti.i32:
+        """Drone d's goal is the groundstation's centre (within 0.25 cells on both axes)."""
+        gs = self.groundstation_centre(e)
+        g = self.goal[e, d]
+        return ti.cast(ti.abs(g[0] - gs[0]) < 0.25 and ti.abs(g[1] - gs[1]) < 0.25, ti.i32)
 
     @ti.func
     def random_corner_goal(self, e, d, h: ti.u32):
@@ -349,6 +331,6 @@ class DroneSim:
                 self.fire.drop_water(e, c)
                 self.extinguished[e, d] = 1
                 self.n_extinguished[e, d] += 1
-                if self.fire.counts[e, 0] == 0:  # N_BURNING
+                if self.fire.burning_count(e) == 0:
                     last = 1
         return last

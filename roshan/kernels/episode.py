@@ -1,12 +1,12 @@
-"""Writing the episode record (:mod:`roshan.episode`) from inside the step kernels.
+"""Episode bookkeeping shared by the task kernels of every level: the record (:mod:`roshan.episode`) written
+when an episode ends, the per-env counters, and the same-step autoreset kernel.
 
-One row per env, ``EPISODE_FIELDS`` in order; valid where the episode ended this step.
+One record row per env, ``EPISODE_FIELDS`` in order; valid where the episode ended this step.
 """
 
 import taichi as ti
 
 from roshan.episode import EPISODE_FIELDS
-from roshan.kernels.fire import N_BURNED, N_EXTINGUISHED
 
 EP_SUCCESS, EP_REASON, EP_STEPS, EP_BURNED, EP_EXTINGUISHED, EP_RETURN = (EPISODE_FIELDS.index(k) for k in (
     "success", "reason", "steps", "burned_fraction", "extinguished", "return"))
@@ -18,6 +18,61 @@ def write_record(episode: ti.template(), fire: ti.template(), e, success, reason
     episode[e, EP_SUCCESS] = ti.cast(success, ti.f32)
     episode[e, EP_REASON] = ti.cast(reason, ti.f32)
     episode[e, EP_STEPS] = ti.cast(steps, ti.f32)
-    episode[e, EP_BURNED] = ti.cast(fire.counts[e, N_BURNED], ti.f32) / fire.num_cells
-    episode[e, EP_EXTINGUISHED] = ti.cast(fire.counts[e, N_EXTINGUISHED], ti.f32)
+    episode[e, EP_BURNED] = ti.cast(fire.burned_count(e), ti.f32) / fire.num_cells
+    episode[e, EP_EXTINGUISHED] = ti.cast(fire.extinguished_count(e), ti.f32)
     episode[e, EP_RETURN] = ret
+
+
+@ti.data_oriented
+class EpisodeKernels:
+    """The episode half of a level's kernels over a FireSim: step limit, step count, return, the ``ended``
+    flags and the kernel that restarts the flagged envs.
+
+    A subclass provides ``new_episode(obs, frames, explore_frames, e, seed_key)`` (a ``ti.func`` resetting
+    env e and writing its first observation). Observations reach the kernels as ``obs`` / ``final_obs`` (the
+    level's observation rows, (E, W)) and the FlyAgent frame stacks of the drones and of the explorers (the
+    FlyAgent level has no explorers and passes its own frames again; they are not touched).
+
+    Resetting in its own kernel, shared with ``reset()``, compiles the reset code once instead of inlining it
+    into the step kernel too (a fresh machine compiled the fused version for ~25 s).
+    """
+
+    def __init__(self, fire, t_max: int):
+        self.fire, self.t_max = fire, t_max
+        E = fire.num_envs
+        self.ended = ti.field(ti.i32, E)  # the episode ended: restart() resets the env
+        self.remaining = ti.field(ti.i32, E)  # physics steps left
+        self.steps = ti.field(ti.i32, E)  # physics steps so far (the TTE)
+        self.ret = ti.field(ti.f32, E)
+
+    def reset_all(self, obs, final_obs, frames, explore_frames, seed_key: int) -> None:
+        """Start a new episode in every env (``final_obs`` untouched)."""
+        self.ended.fill(1)
+        self.restart(obs, final_obs, frames, explore_frames, seed_key, 0)
+
+    @ti.kernel
+    def restart(self, obs: ti.types.ndarray(dtype=ti.f32, ndim=2), final_obs: ti.types.ndarray(dtype=ti.f32, ndim=2),
+                frames: ti.types.ndarray(dtype=ti.f32, ndim=4), explore_frames: ti.types.ndarray(dtype=ti.f32, ndim=4),
+                seed_key: ti.u32, keep_final: ti.i32):
+        """Reset the envs flagged in ``ended``, first copying their observation to ``final_obs``."""
+        for v in range(self.fire.num_envs * self.fire.env_pad):
+            e = v // self.fire.env_pad
+            if v % self.fire.env_pad == 0 and self.ended[e] != 0:
+                if keep_final != 0:
+                    for k in range(obs.shape[1]):
+                        final_obs[e, k] = obs[e, k]
+                self.new_episode(obs, frames, explore_frames, e, seed_key)
+                self.ended[e] = 0
+
+    @ti.func
+    def start_counters(self, e):
+        self.remaining[e] = self.t_max
+        self.steps[e] = 0
+        self.ret[e] = 0.0
+
+    @ti.func
+    def close_episode(self, episode: ti.template(), dones: ti.template(), e, success, reason, truncated):
+        """Write env e's record and done flags: truncated (a pure time-out) or terminated."""
+        write_record(episode, self.fire, e, success, reason, self.steps[e], self.ret[e])
+        dones[e, 0] = ti.cast(1 - truncated, ti.u8)
+        dones[e, 1] = ti.cast(truncated, ti.u8)

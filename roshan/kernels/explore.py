@@ -201,7 +201,7 @@ class ExploreMaps:
 
     def reset(self, mask=None) -> None:
         """Clear the fire map and restart the meander in the masked envs (after the explorers' reset)."""
-        mask = self._all if mask is None else FireSim._int32(mask, (self.num_envs,), "reset mask")
+        mask = self._all if mask is None else FireSim.int32_array(mask, (self.num_envs,), "reset mask")
         self._reset(mask)
 
     def observe_kernel(self, group: DroneSim | None = None) -> None:
@@ -239,6 +239,20 @@ class ExploreMaps:
             self.advance_if_reached(e, self.drones)
 
     # ------------------------------------------------------------------------------------------ fire map
+
+    @ti.func
+    def is_known_fire(self, e, c) -> ti.i32:
+        """1 if flat cell c is on env e's fire map."""
+        return ti.cast(self.fire_map[e, c // self.cols, c % self.cols] != 0, ti.i32)
+
+    @ti.func
+    def forget_fire(self, e, c):
+        """A drone put cell c out: take it off the fire map."""
+        i = c // self.cols
+        j = c % self.cols
+        if self.fire_map[e, i, j] != 0:
+            self.fire_map[e, i, j] = ti.i8(0)
+            self.known_fires[e] -= 1
 
     @ti.func
     def observe_square(self, e, cx, cy, half: ti.template()):

@@ -194,7 +194,7 @@ class FireSim:
         Clears every cell (its durations are redrawn when first needed), particles and lists, draws the wind
         and lights the initial fires.
         """
-        mask = self._all if mask is None else self._int32(mask, (self.num_envs,), "reset mask")
+        mask = self._all if mask is None else self.int32_array(mask, (self.num_envs,), "reset mask")
         self._reset_envs(mask, self.seed_key)
 
     @property
@@ -214,8 +214,8 @@ class FireSim:
             requests: (E, M) int32 flat cell indices ``i * cols + j``; negative entries are ignored.
             extinguished: (E, M) int32 output, 1 where the cell was burning (and is now flooded), else 0.
         """
-        requests = self._int32(requests, (self.num_envs, None), "flood requests")
-        self._flood(requests, self._int32(extinguished, requests.shape, "flood output", copy_ok=False))
+        requests = self.int32_array(requests, (self.num_envs, None), "flood requests")
+        self._flood(requests, self.int32_array(extinguished, requests.shape, "flood output", copy_ok=False))
 
     def stats(self) -> dict[str, np.ndarray]:
         """Per-env counters, each an (E,) int array (a host copy: not for the step loop)."""
@@ -263,15 +263,17 @@ class FireSim:
     # Test hooks: drive the cell state machine directly, without particles or the generator.
     def ignite_cells(self, mask) -> None:
         """Ignite the cells where ``mask`` (E, rows*cols int32) is non-zero and that can ignite."""
-        self._ignite_cells(self._int32(mask, (self.num_envs, self.num_cells), "ignition mask"))
+        self._ignite_cells(self.int32_array(mask, (self.num_envs, self.num_cells), "ignition mask"))
 
     def prescribe_exposure(self, mask) -> None:
         """Mark cells (E, rows*cols int32 mask) as visited by a particle in the next update."""
-        self._prescribe_exposure(self._int32(mask, (self.num_envs, self.num_cells), "exposure mask"))
+        self._prescribe_exposure(self.int32_array(mask, (self.num_envs, self.num_cells), "exposure mask"))
 
     @staticmethod
-    def _int32(x, shape, what, copy_ok=True):
-        """Check an int array's shape; numpy inputs become contiguous int32 (torch tensors must already be)."""
+    def int32_array(x, shape, what, copy_ok=True):
+        """Check an int array's shape; numpy inputs become contiguous int32 (torch tensors must already be).
+
+        Public: the drone and map classes check their reset masks with it too."""
         got = tuple(x.shape)
         if len(got) != len(shape) or any(want is not None and g != want for g, want in zip(got, shape, strict=True)):
             want = tuple("M" if w is None else w for w in shape)
@@ -329,9 +331,64 @@ class FireSim:
         """Flood cell c of env e (firespin.md 8); 1 if it was burning."""
         return self._drop_water(e, c)
 
+    # Read access for the kernels of other modules (drones, tasks, episodes, rendering, the initial-fire
+    # generator): they ask by name, so the record layouts (C_*, N_*) stay this module's business.
+
     @ti.func
     def is_burning(self, e, c) -> ti.i32:
         return ti.cast(self.cells[e, c][C_STATE] == BURNING, ti.i32)
+
+    @ti.func
+    def cell_state(self, e, c) -> ti.i32:
+        """Cell c's class id, or BURNING / BURNED / FLOODED."""
+        return self.cells[e, c][C_STATE]
+
+    @ti.func
+    def can_ignite(self, e, c) -> ti.i32:
+        """1 if cell c's current state can catch fire."""
+        return self.cls_ignitable[self.cells[e, c][C_STATE]]
+
+    @ti.func
+    def burning_count(self, e) -> ti.i32:
+        return self.counts[e, N_BURNING]
+
+    @ti.func
+    def burning_cell(self, e, k) -> ti.i32:
+        """The k-th entry (k < burning_count) of env e's unordered list of burning cells."""
+        return self.burning[e, k]
+
+    @ti.func
+    def burned_count(self, e) -> ti.i32:
+        """Cells burned out since the reset."""
+        return self.counts[e, N_BURNED]
+
+    @ti.func
+    def extinguished_count(self, e) -> ti.i32:
+        """Burning cells put out by water since the reset."""
+        return self.counts[e, N_EXTINGUISHED]
+
+    @ti.func
+    def convection_count(self, e) -> ti.i32:
+        return self.counts[e, N_CONV]
+
+    @ti.func
+    def radiation_count(self, e) -> ti.i32:
+        return self.counts[e, N_RAD]
+
+    @ti.func
+    def particle_count(self, e) -> ti.i32:
+        """Live convection plus radiation particles."""
+        return self.counts[e, N_CONV] + self.counts[e, N_RAD]
+
+    @ti.func
+    def ignite(self, e, c):
+        """Light cell c (the initial-fire generator; callers check can_ignite first)."""
+        self._ignite(e, c)
+
+    @ti.func
+    def report_ignition_short(self, e, missing):
+        """The generator found ``missing`` fewer ignitable cells than it was asked to light."""
+        self.counts[e, N_IGNITION_SHORT] = missing
 
     @ti.func
     def _draw_wind(self, e):

@@ -5,9 +5,9 @@ handles its goal (complex policy: extinguish and take the nearest unreserved fir
 the objective), is checked for termination and rewarded; then neighbours and collisions are recomputed. One
 env step (a control period, agents.md 12) runs ``frame_skips`` physics steps with the same actions, fewer if
 the episode ends, and then pushes one observation frame. A second launch copies the observation of every env
-whose episode ended to ``final_obs`` and resets it (Gymnasium's same-step autoreset). Resetting in its own
-kernel, shared with ``reset()``, compiles the reset code once instead of inlining it into the step kernel too
-(a fresh machine compiled the fused version for ~25 s).
+whose episode ended to ``final_obs`` and resets it (Gymnasium's same-step autoreset,
+:class:`roshan.kernels.episode.EpisodeKernels`). The goal rules are :class:`roshan.kernels.tasks.GoalRules`,
+shared with the planner level.
 """
 
 import math
@@ -19,9 +19,10 @@ from roshan.config import FlyConfig
 from roshan.episode import BOUNDARY, COLLISION, TIMEOUT
 from roshan.kernels import observe, rng
 from roshan.kernels.drones import DroneSim
-from roshan.kernels.episode import write_record
-from roshan.kernels.fire import N_BURNING, N_CONV, N_RAD, FireSim
+from roshan.kernels.episode import EpisodeKernels
+from roshan.kernels.fire import FireSim
 from roshan.kernels.rewards import RewardCoefficients, fly_reward, proximity_sum
+from roshan.kernels.tasks import EXTINGUISH, REACH, BurningCells, GoalRules
 
 
 def time_limit(rows: int, cols: int, cell: float, dt: float, v_max: float, fire_percentage: float,
@@ -40,45 +41,23 @@ def time_limit(rows: int, cols: int, cell: float, dt: float, v_max: float, fire_
 
 
 @ti.data_oriented
-class FlyKernels:
+class FlyKernels(EpisodeKernels):
     """The fused reset and step kernels over a FireSim and a DroneSim."""
 
     def __init__(self, fire: FireSim, drones: DroneSim, cfg: FlyConfig, t_max: int):
-        self.fire, self.drones, self.cfg = fire, drones, cfg
+        super().__init__(fire, t_max)
+        self.drones, self.cfg = drones, cfg
         self.coef = RewardCoefficients.resolve(cfg.rewards, cfg.policy == "complex", cfg.collision)
         self.is_complex = cfg.policy == "complex"
         self.collision_on = cfg.collision
-        self.sticky = cfg.sticky_extinguish
         self.frames = cfg.frames
         self.frame_skips = cfg.frame_skips
         if not 1 <= cfg.frame_skips <= 16:
             raise ValueError(f"fly.frame_skips = {cfg.frame_skips!r}; expected an integer in [1, 16]")
         # Complex policy with a finite tank: an empty drone flies home and waits there until full.
-        self.water_policy = self.is_complex and drones.use_water
-        self.t_max = t_max
+        self.rules = GoalRules(drones, BurningCells(fire), mode=EXTINGUISH if self.is_complex else REACH,
+                               water_policy=self.is_complex and drones.use_water, sticky=cfg.sticky_extinguish)
         self.goal_fire_p = cfg.fire_goal_percentage
-        E = fire.num_envs
-        self.ended = ti.field(ti.i32, E)  # the episode ended in this step: restart() resets the env
-        self.remaining = ti.field(ti.i32, E)  # physics steps left
-        self.steps = ti.field(ti.i32, E)  # physics steps so far
-        self.ret = ti.field(ti.f32, E)
-
-    def reset_all(self, obs, final_obs, seed_key: int) -> None:
-        self.ended.fill(1)
-        self.restart(obs, final_obs, seed_key, 0)
-
-    @ti.kernel
-    def restart(self, obs: ti.types.ndarray(dtype=ti.f32, ndim=4), final_obs: ti.types.ndarray(dtype=ti.f32, ndim=4),
-                seed_key: ti.u32, keep_final: ti.i32):
-        """Reset the envs flagged in ``ended``, first copying their observation to ``final_obs``."""
-        for v in range(self.fire.num_envs * self.fire.env_pad):
-            e = v // self.fire.env_pad
-            if v % self.fire.env_pad == 0 and self.ended[e] != 0:
-                if keep_final != 0:
-                    for d, t, k in ti.ndrange(self.drones.num_drones, self.frames, obs.shape[3]):
-                        final_obs[e, d, t, k] = obs[e, d, t, k]
-                self.new_episode(obs, e, seed_key)
-                self.ended[e] = 0
 
     @ti.kernel
     def step(self, actions: ti.types.ndarray(dtype=ti.f32, ndim=3), obs: ti.types.ndarray(dtype=ti.f32, ndim=4),
@@ -89,24 +68,23 @@ class FlyKernels:
                 self.step_env(actions, obs, rewards, dones, episode, v // self.fire.env_pad)
 
     @ti.func
-    def new_episode(self, obs: ti.template(), e, seed_key: ti.u32):
-        """Reset env e: fire, drones, initial goals, step limit, and a full frame stack."""
+    def new_episode(self, obs: ti.template(), frames: ti.template(), explore_frames: ti.template(), e,
+                    seed_key: ti.u32):
+        """Reset env e: fire, drones, initial goals, step limit, and a full frame stack (``frames``)."""
         dr = self.drones
         self.fire.reset_env(e, seed_key)
         dr.place(e)
         k = rng.key(self.fire.env_key[e], rng.DOMAIN_DRONES, 1)
         for d in range(dr.num_drones):
             if rng.uniform(rng.key(k, d, 0)) < self.goal_fire_p:
-                dr.next_fire(e, d)
+                self.rules.retarget(e, d)
             else:
                 dr.random_corner_goal(e, d, rng.key(k, d, 1))
             dr.prev_dist[e, d] = dr.distance_to_goal(e, d)
         dr.update_neighbours(e)
         for d in range(dr.num_drones):
-            observe.fill_frames(obs, dr, e, d, self.frames)
-        self.remaining[e] = self.t_max
-        self.steps[e] = 0
-        self.ret[e] = 0.0
+            observe.fill_frames(frames, dr, e, d, self.frames)
+        self.start_counters(e)
 
     @ti.func
     def step_env(self, actions: ti.template(), obs: ti.template(), rewards: ti.template(), dones: ti.template(),
@@ -141,8 +119,7 @@ class FlyKernels:
         real_end = 0  # some drone ended for a reason other than the clock (goal, fires out, crash, exit)
         reward_sum = 0.0
         for d in range(dr.num_drones):
-            dr.move_drone(e, d, ti.Vector([actions[e, d, 0], actions[e, d, 1]]))
-            goal_flag |= self.handle_goal(e, d)
+            goal_flag |= self.rules.drone_step(e, d, ti.Vector([actions[e, d, 0], actions[e, d, 1]]))
             succeeded = self.has_succeeded(e, d)
             reason = self.failure_reason(e, d, 0)
             real_end |= ti.cast(reason != 0 or succeeded != 0, ti.i32)
@@ -165,46 +142,8 @@ class FlyKernels:
         if any_terminal != 0:
             # A state that really ends the task terminates even on the last allowed step (no bootstrapping
             # from a crash or a success); only a pure time-out truncates.
-            dones[e, 0] = ti.cast(real_end, ti.u8)
-            dones[e, 1] = ti.cast(1 - real_end, ti.u8)
-            write_record(episode, self.fire, e, 1 - any_failed, last_reason, self.steps[e], self.ret[e])
+            self.close_episode(episode, dones, e, 1 - any_failed, last_reason, 1 - real_end)
             self.ended[e] = 1
-
-    @ti.func
-    def handle_goal(self, e, d) -> ti.i32:
-        """agents.md 7: at its goal a complex-policy drone extinguishes and takes the next fire; a simple-policy
-        drone has reached its objective. Returns 1 if this drone put out the map's last fire.
-
-        With the water limit (complex policy) a drop that empties the tank sends the drone to the groundstation
-        centre (no reservation); it takes the next fire once its tank is full again (agents.md 10.2, 14).
-        """
-        dr = self.drones
-        if ti.static(not self.sticky):
-            dr.extinguished[e, d] = 0  # the fix: Extinguish pays on the step water hits a fire only
-        last = 0
-        going_home = 0
-        if ti.static(self.water_policy):
-            going_home = dr.refilling[e, d]
-            if going_home != 0 and dr.water[e, d] >= dr.capacity:  # refilled in move_drone this step
-                dr.refilling[e, d] = 0
-                dr.next_fire(e, d)
-        if going_home == 0 and dr.at_goal(e, d) != 0:
-            if ti.static(self.is_complex):
-                if dr.extinguish_here(e, d) != 0:
-                    dr.objective[e, d] = 1
-                    last = 1
-                dr.goal_cell[e, d] = -1
-                empty = 0
-                if ti.static(self.water_policy):
-                    empty = 1 - dr.has_water(e, d)
-                if empty != 0:
-                    dr.refilling[e, d] = 1
-                    dr.goal[e, d] = dr.groundstation_centre(e)
-                else:
-                    dr.next_fire(e, d)
-            else:
-                dr.objective[e, d] = 1
-        return last
 
     @ti.func
     def failure_reason(self, e, d, timed_out) -> ti.i32:
@@ -224,8 +163,7 @@ class FlyKernels:
         """Simple: reached the goal. Complex: put out the last fire, or nothing burns and no particle lives."""
         success = self.drones.objective[e, d]
         if ti.static(self.is_complex):
-            fc = ti.static(self.fire.counts)
-            if fc[e, N_BURNING] == 0 and fc[e, N_CONV] + fc[e, N_RAD] == 0:
+            if self.fire.burning_count(e) == 0 and self.fire.particle_count(e) == 0:
                 success = 1
         return success
 

@@ -54,15 +54,10 @@ def _random_cell(sim: ti.template(), e) -> ti.i32:
 
 
 @ti.func
-def _can_ignite(sim: ti.template(), e, c) -> ti.i32:
-    return sim.cls_ignitable[sim.cells[e, c][0]]
-
-
-@ti.func
 def _fresh(sim: ti.template(), e, c, tag) -> ti.i32:
     """Not visited by this cluster, not used by any, and ignitable: a candidate to grow into."""
     m = sim.mark[e, c]
-    return ti.cast((m & USED) == 0 and (m >> 1) != tag and _can_ignite(sim, e, c) != 0, ti.i32)
+    return ti.cast((m & USED) == 0 and (m >> 1) != tag and sim.can_ignite(e, c) != 0, ti.i32)
 
 
 @ti.func
@@ -80,7 +75,7 @@ def _light_clusters(sim: ti.template(), e):
         start = -1
         for _ in range(MAX_START_TRIES):
             cell = _random_cell(sim, e)
-            if (sim.mark[e, cell] & USED) == 0 and _can_ignite(sim, e, cell) != 0:
+            if (sim.mark[e, cell] & USED) == 0 and sim.can_ignite(e, cell) != 0:
                 start = cell
                 break
         if start >= 0:
@@ -125,14 +120,14 @@ def _grow_cluster(sim: ti.template(), e, start, size, tag):
     """Breadth-first growth with probabilistic spread, one-cell tendrils and re-seeding (firespin.md 11)."""
     head = 0
     tail = _push(sim, e, 0, start, tag, 0)
-    first_lit = sim.counts[e, 0]  # this cluster's fires are burning[first_lit : first_lit + ignited]
+    first_lit = sim.burning_count(e)  # this cluster's fires are burning[first_lit : first_lit + ignited]
     ignited = 0
     failures = 0
     while head < tail and ignited < size:
         cell = sim.exposed[e, head]
         head += 1
-        if _can_ignite(sim, e, cell) != 0:
-            sim._ignite(e, cell)
+        if sim.can_ignite(e, cell) != 0:
+            sim.ignite(e, cell)
             ignited += 1
         sim.mark[e, cell] |= USED
         n = _gather_neighbours(sim, e, cell, tag, 1)
@@ -160,7 +155,7 @@ def _grow_cluster(sim: ti.template(), e, start, size, tag):
 def _reseed_from_frontier(sim: ti.template(), e, tail, tag, first_lit, ignited):
     pushed = 0
     for _ in range(RESEED_FRONTIER_TRIES):
-        src = sim.burning[e, first_lit + rng.uniform_int(_draw(sim, e), ignited)]
+        src = sim.burning_cell(e, first_lit + rng.uniform_int(_draw(sim, e), ignited))
         n = _gather_neighbours(sim, e, src, tag, 0)
         _shuffle_candidates(sim, e, n)
         for k in range(n):
@@ -188,18 +183,24 @@ def _light_scattered(sim: ti.template(), e, n_fires):
     """Uniform random single cells; lights nothing (and flags the env) if too few ignitable cells remain."""
     available = 0
     for c in range(sim.num_cells):
-        available += _can_ignite(sim, e, c)
+        available += sim.can_ignite(e, c)
     if available < n_fires:
-        sim.counts[e, 10] = n_fires - available  # N_IGNITION_SHORT: reported by the caller
+        sim.report_ignition_short(e, n_fires - available)
     else:
-        lit = 0
-        for _ in range(MAX_SCATTER_TRIES):
-            if lit >= n_fires:
-                break
-            c = _random_cell(sim, e)
-            if _can_ignite(sim, e, c) != 0:
-                sim._ignite(e, c)
-                lit += 1
+        _scatter(sim, e, 0, n_fires, MAX_SCATTER_TRIES)
+
+
+@ti.func
+def _scatter(sim: ti.template(), e, lit, n_fires, tries: ti.template()):
+    """Light random ignitable cells until ``n_fires`` are lit (``lit`` already are) or ``tries`` draws are spent."""
+    n = lit
+    for _ in range(tries):
+        if n >= n_fires:
+            break
+        c = _random_cell(sim, e)
+        if sim.can_ignite(e, c) != 0:
+            sim.ignite(e, c)
+            n += 1
 
 
 @ti.func
@@ -228,7 +229,7 @@ def _light_ring(sim: ti.template(), e, n_fires):
             d = ti.sqrt(ti.cast(di * di + dj * dj, ti.f32))
             if 0 <= i < sim.rows and 0 <= j < sim.cols and r_in <= d <= r_out:
                 c = i * sim.cols + j
-                if _can_ignite(sim, e, c) != 0:
+                if sim.can_ignite(e, c) != 0:
                     sim.exposed[e, n] = c
                     n += 1
     lit = 0
@@ -237,12 +238,6 @@ def _light_ring(sim: ti.template(), e, n_fires):
             pick = k + rng.uniform_int(_draw(sim, e), n - k)
             c = sim.exposed[e, pick]
             sim.exposed[e, pick] = sim.exposed[e, k]
-            sim._ignite(e, c)
+            sim.ignite(e, c)
             lit += 1
-    for _ in range(MAX_RING_FILL_TRIES):
-        if lit >= n_fires:
-            break
-        c = _random_cell(sim, e)
-        if _can_ignite(sim, e, c) != 0:
-            sim._ignite(e, c)
-            lit += 1
+    _scatter(sim, e, lit, n_fires, MAX_RING_FILL_TRIES)

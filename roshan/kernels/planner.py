@@ -5,7 +5,9 @@ One planner step of env e is ``apply`` (the chosen candidates become the drones'
 ``low_step`` (the fire, the explorers and the planner drones each advance once; the env's Python side runs the
 frozen FlyAgent policies in between), then ``finish`` (reward, termination, a fresh observation). With the
 greedy controller (the heuristic baseline of agents.md 10.2) ``apply`` is skipped, the drones pick their own
-goals inside ``low_step`` and an episode may end at any low-level step.
+goals inside ``low_step`` and an episode may end at any low-level step. The low-level drone step and its goal
+rules are the FlyAgent level's (:class:`roshan.kernels.tasks.GoalRules`); this module adds the decisions,
+the planner rewards and termination on top.
 
 Deliberate differences from the reference (agents.md 13.1, 13.5):
 - the observation is built after the interval from the state it ends in (the reference shows the planner the
@@ -26,10 +28,11 @@ import taichi as ti
 from roshan.episode import BURNOUT, TIMEOUT
 from roshan.kernels import observe
 from roshan.kernels.drones import DroneSim
-from roshan.kernels.episode import write_record
+from roshan.kernels.episode import EpisodeKernels
 from roshan.kernels.explore import ExploreMaps
-from roshan.kernels.fire import N_BURNED, N_BURNING, FireSim
+from roshan.kernels.fire import FireSim
 from roshan.kernels.rewards import planner_outcome_reward, planner_step_reward
+from roshan.kernels.tasks import DROP_ANYWHERE, EXTINGUISH, BurningCells, GoalRules, KnownFires
 
 GROUND_GOAL = -2  # goal_cell of a drone sent to the groundstation by the planner
 
@@ -60,7 +63,7 @@ def obs_layout(num_drones: int, max_candidates: int) -> dict[str, tuple[int, int
 
 
 @ti.data_oriented
-class PlannerKernels:
+class PlannerKernels(EpisodeKernels):
     """The planner level over a FireSim, the planner drones and the explorer drones of the same envs.
 
     Args:
@@ -68,7 +71,7 @@ class PlannerKernels:
         maps: the fire map and meander waypoints (its drone group is ``explorers``).
         interval: low-level steps per planner step (``hierarchy_timesteps``).
         t_max: low-level step limit of an episode.
-        coef: :class:`roshan.env.rewards.PlannerCoefficients`.
+        coef: :class:`roshan.kernels.rewards.PlannerCoefficients`.
         greedy: the drones follow the heuristic state machine (agents.md 10.2) instead of planner goals.
         move_explorers: step the explorers (evaluation); in planner training they stay at the groundstation.
         detected: the candidates are the fire map's cells (fires some drone has seen) instead of all burning
@@ -81,8 +84,9 @@ class PlannerKernels:
     def __init__(self, fire: FireSim, drones: DroneSim, explorers: DroneSim, maps: ExploreMaps, *, interval: int,
                  t_max: int, coef, greedy: bool, move_explorers: bool, detected: bool, burnout: float,
                  max_candidates: int, fly_frames: int, explore_frames: int):
-        self.fire, self.drones, self.explorers, self.maps = fire, drones, explorers, maps
-        self.interval, self.t_max, self.coef = interval, t_max, coef
+        super().__init__(fire, t_max)
+        self.drones, self.explorers, self.maps = drones, explorers, maps
+        self.interval, self.coef = interval, coef
         self.greedy, self.move_explorers, self.detected = greedy, move_explorers, detected
         self.burnout = burnout
         self.K = max_candidates
@@ -93,12 +97,14 @@ class PlannerKernels:
             self.layout[k][0] for k in ("drones", "goals", "water", "fires", "fires_mask", "globals"))
         self.norm = 2.0 / max(fire.rows, fire.cols)  # norm(q) = q * norm - 1
         self.log_cells = math.log(1.0 + fire.num_cells)
+        # The low level runs the FlyAgent goal rules: planner drones drop water on every burning cell they fly
+        # over (agents.md 7) and keep the planner's goals; the heuristic's drones pick known fires themselves.
+        if greedy:
+            self.rules = GoalRules(drones, KnownFires(fire, maps), mode=EXTINGUISH, wake_idle=True, sensor=maps)
+        else:
+            self.rules = GoalRules(drones, BurningCells(fire), mode=DROP_ANYWHERE, sensor=maps)
         E, N = fire.num_envs, drones.num_drones
-        self.ended = ti.field(ti.i32, E)  # the episode ended: restart() resets the env
         self.finished = ti.field(ti.i32, E)  # greedy: ended inside this planner step, skip the rest of it
-        self.remaining = ti.field(ti.i32, E)
-        self.steps = ti.field(ti.i32, E)  # low-level steps so far (TTE)
-        self.ret = ti.field(ti.f32, E)
         self.objective = ti.field(ti.i32, E)  # a drone put out the last burning cell in this planner step
         self.ext_count = ti.field(ti.i32, E)  # cells extinguished in this planner step
         self.step_terms = ti.field(ti.f32, E)  # goal-dependent reward terms of the current decision
@@ -110,20 +116,6 @@ class PlannerKernels:
         self.cand_count = ti.field(ti.i32, E)  # valid candidates, groundstation included
 
     # ------------------------------------------------------------------------------------------ kernels
-
-    @ti.kernel
-    def restart(self, obs: ti.types.ndarray(dtype=ti.f32, ndim=2), final_obs: ti.types.ndarray(dtype=ti.f32, ndim=2),
-                obs_fly: ti.types.ndarray(dtype=ti.f32, ndim=4), obs_explore: ti.types.ndarray(dtype=ti.f32, ndim=4),
-                seed_key: ti.u32, keep_final: ti.i32):
-        """Reset the envs flagged in ``ended``, first copying their planner observation to ``final_obs``."""
-        for v in range(self.fire.num_envs * self.fire.env_pad):
-            e = v // self.fire.env_pad
-            if v % self.fire.env_pad == 0 and self.ended[e] != 0:
-                if keep_final != 0:
-                    for k in range(obs.shape[1]):
-                        final_obs[e, k] = obs[e, k]
-                self.new_episode(obs, obs_fly, obs_explore, e, seed_key)
-                self.ended[e] = 0
 
     @ti.kernel
     def apply(self, actions: ti.types.ndarray(dtype=ti.i64, ndim=2)):
@@ -182,7 +174,7 @@ class PlannerKernels:
                 dr.goal[e, d] = dr.groundstation_centre(e)
                 dr.goal_cell[e, d] = -1
             else:
-                dr.next_fire(e, d)
+                self.rules.retarget(e, d)
             dr.prev_dist[e, d] = dr.distance_to_goal(e, d)
             self.prev_water[e, d] = dr.water[e, d]
         dr.update_neighbours(e)
@@ -193,21 +185,17 @@ class PlannerKernels:
             observe.fill_frames(obs_fly, dr, e, d, self.fly_frames)
         for d in range(ex.num_drones):
             observe.fill_frames(obs_explore, ex, e, d, self.explore_frames)
-        self.remaining[e] = self.t_max
-        self.steps[e] = 0
-        self.ret[e] = 0.0
+        self.start_counters(e)
         self.decisions[e] = 0
         self.finished[e] = 0
-        self.prev_burning[e] = self.fire.counts[e, N_BURNING]
+        self.prev_burning[e] = self.fire.burning_count(e)
         self.mean_dist[e] = self.mean_goal_distance(e)
         self.build_obs(obs, e)
 
     @ti.func
     def record_episode(self, episode: ti.template(), dones: ti.template(), e, success, reason):
         """Write env e's episode record; a pure timeout truncates, every other end terminates."""
-        write_record(episode, self.fire, e, success, reason, self.steps[e], self.ret[e])
-        dones[e, 0] = ti.cast(reason != TIMEOUT, ti.u8)
-        dones[e, 1] = ti.cast(reason == TIMEOUT, ti.u8)
+        self.close_episode(episode, dones, e, success, reason, ti.cast(reason == TIMEOUT, ti.i32))
         self.finished[e] = 1
 
     @ti.func
@@ -215,13 +203,13 @@ class PlannerKernels:
         """agents.md 13.6 (later rules overwrite the reason): (terminal, reason)."""
         terminal = self.objective[e]
         reason = 0
-        if ti.cast(self.fire.counts[e, N_BURNED], ti.f32) > self.burnout * self.fire.num_cells:
+        if ti.cast(self.fire.burned_count(e), ti.f32) > self.burnout * self.fire.num_cells:
             terminal = 1
             reason = BURNOUT
         if timed_out != 0:
             terminal = 1
             reason = TIMEOUT
-        if self.fire.counts[e, N_BURNING] == 0:
+        if self.fire.burning_count(e) == 0:
             terminal = 1  # put out, or burned down on its own
         return ti.Vector([terminal, reason])
 
@@ -234,7 +222,7 @@ class PlannerKernels:
         end = self.end_reason(e, timed_out)
         frac = ti.max(ti.cast(self.remaining[e], ti.f32), 0.0) / self.t_max
         r = planner_outcome_reward(self.coef, self.objective[e], timed_out, end[0], frac)
-        burning = self.fire.counts[e, N_BURNING]
+        burning = self.fire.burning_count(e)
         drop = ti.cast(self.prev_burning[e] - burning, ti.f32)
         self.prev_burning[e] = burning
         refilled = 0.0
@@ -264,7 +252,7 @@ class PlannerKernels:
             if k >= 1 and k < self.cand_count[e]:
                 c = self.cand_cell[e, k]
                 dr.goal_cell[e, d] = c
-                dr.goal[e, d] = self.cell_centre(c)
+                dr.goal[e, d] = dr.cell_centre(c)
             else:
                 dr.goal_cell[e, d] = GROUND_GOAL
                 dr.goal[e, d] = gs
@@ -299,11 +287,6 @@ class PlannerKernels:
         self.step_terms[e] = planner_step_reward(self.coef, to_ground, duplicates, 0, gain, 0.0, 0.0, 0)
 
     @ti.func
-    def cell_centre(self, c):
-        """Grid coordinates (row, col) of the centre of flat cell c."""
-        return ti.Vector([ti.cast(c // self.fire.cols, ti.f32), ti.cast(c % self.fire.cols, ti.f32)]) + 0.5
-
-    @ti.func
     def mean_goal_distance(self, e) -> ti.f32:
         dr = self.drones
         s = 0.0
@@ -330,14 +313,9 @@ class PlannerKernels:
             for x in range(ex.num_drones):
                 observe.push_frame(obs_explore, ex, e, x, self.explore_frames)
         for d in range(dr.num_drones):
-            dr.move_drone(e, d, ti.Vector([act_fly[e, d, 0], act_fly[e, d, 1]]))
-            self.maps.observe_drone(e, dr, d)
-            if ti.static(self.greedy):
-                self.heuristic(e, d)
-            else:  # PlannerFlyAgents drop water on every burning cell they fly over (agents.md 7)
-                if dr.extinguish_here(e, d) != 0:
-                    self.objective[e] = 1
-                self.ext_count[e] += dr.extinguished[e, d]
+            if self.rules.drone_step(e, d, ti.Vector([act_fly[e, d, 0], act_fly[e, d, 1]])) != 0:
+                self.objective[e] = 1
+            self.ext_count[e] += dr.extinguished[e, d]
         dr.update_neighbours(e)
         for d in range(dr.num_drones):
             observe.push_frame(obs_fly, dr, e, d, self.fly_frames)
@@ -346,60 +324,6 @@ class PlannerKernels:
             end = self.end_reason(e, ti.cast(self.remaining[e] <= 0, ti.i32))
             if end[0] != 0:
                 self.record_episode(episode, dones, e, ti.cast(end[1] == 0, ti.i32), end[1])
-
-    @ti.func
-    def heuristic(self, e, d):
-        """agents.md 10.2 without the water limit (RECHARGE fills at once): a drone waiting at the groundstation
-        takes the nearest known fire as soon as there is one; a drone at its goal drops water there and takes
-        the next known fire (the groundstation if none is free)."""
-        dr = self.drones
-        gs = dr.groundstation_centre(e)
-        g = dr.goal[e, d]
-        if ti.abs(g[0] - gs[0]) < 0.25 and ti.abs(g[1] - gs[1]) < 0.25 and self.maps.known_fires[e] > 0:
-            self.next_known_fire(e, d)
-        elif dr.at_goal(e, d) != 0:
-            if dr.extinguish_here(e, d) != 0:
-                self.objective[e] = 1
-            if dr.extinguished[e, d] != 0:
-                self.ext_count[e] += 1
-                c = dr.cell_of(e, d)  # put out: no longer a known fire
-                i = c // self.fire.cols
-                j = c % self.fire.cols
-                if self.maps.fire_map[e, i, j] != 0:
-                    self.maps.fire_map[e, i, j] = ti.i8(0)
-                    self.maps.known_fires[e] -= 1
-            dr.goal_cell[e, d] = -1
-            self.next_known_fire(e, d)
-
-    @ti.func
-    def next_known_fire(self, e, d):
-        """agents.md 10.1 over the fire map: the nearest known fire cell (squared index distance from the
-        drone's cell, first of equals in row-major order) that no other drone holds while it still burns."""
-        dr = self.drones
-        p = dr.pos[e, d] / dr.cell
-        pi = ti.floor(p[0])
-        pj = ti.floor(p[1])
-        best = -1
-        best_d2 = 0.0
-        cols = self.fire.cols
-        for c in range(self.fire.num_cells):
-            if self.maps.fire_map[e, c // cols, c % cols] != 0:
-                free = 1
-                for other in range(dr.num_drones):
-                    if other != d and dr.goal_cell[e, other] == c and self.fire.is_burning(e, c) != 0:
-                        free = 0
-                if free != 0:
-                    di = ti.cast(c // cols, ti.f32) - pi
-                    dj = ti.cast(c % cols, ti.f32) - pj
-                    d2 = di * di + dj * dj
-                    if best < 0 or d2 < best_d2:
-                        best = c
-                        best_d2 = d2
-        dr.goal_cell[e, d] = best
-        goal = dr.groundstation_centre(e)
-        if best >= 0:
-            goal = self.cell_centre(best)
-        dr.goal[e, d] = goal
 
     # ------------------------------------------------------------------------------------------ observation
 
@@ -433,7 +357,7 @@ class PlannerKernels:
             else:
                 listed = self.fire.is_burning(e, c)
             if listed != 0 and k < self.K:
-                centre = self.cell_centre(c)
+                centre = dr.cell_centre(c)
                 self.cand_cell[e, k] = c
                 obs[e, f0 + 2 * k] = centre[0] * self.norm - 1.0
                 obs[e, f0 + 2 * k + 1] = centre[1] * self.norm - 1.0

@@ -48,7 +48,6 @@ import taichi as ti
 from PIL import Image
 
 from roshan.ggui import acquire_window, release_window
-from roshan.kernels.fire import C_STATE, N_CONV, N_RAD
 from roshan.kernels.particles import P_X1, P_X2, P_Y, R_Y, radiation_position
 from roshan.maps import BURNED, CLASSES, FLOODED
 
@@ -245,18 +244,18 @@ class FrameRenderer:
         cp = self.cell_px
         for py, px in self.image:
             c = (py // cp) * self.sim.cols + px // cp
-            self.image[py, px] = self.colours[self.sim.cells[env, c][C_STATE], self.sim.land[c]]
+            self.image[py, px] = self.colours[self.sim.cell_state(env, c), self.sim.land[c]]
 
     @ti.kernel
     def _splat_particles(self, env: ti.i32):
         # Serial loops: overlapping particles read-modify-write the same pixels, so a parallel loop would race
         # and make frames depend on thread timing.
         ti.loop_config(serialize=True)
-        for k in range(self.sim.counts[env, N_CONV]):
+        for k in range(self.sim.convection_count(env)):
             p = self.sim.conv[env, k]
             self._splat(p[P_X1], p[P_X2], p[P_Y], False)
         ti.loop_config(serialize=True)
-        for k in range(self.sim.counts[env, N_RAD]):
+        for k in range(self.sim.radiation_count(env)):
             p = self.sim.rad[env, k]
             x = radiation_position(p)
             self._splat(x[0], x[1], p[R_Y], True)

@@ -46,7 +46,7 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
     rows: list[list] = [[] for _ in range(E)]
     frame = 0
     bar = tqdm(total=quota * E, unit="episode", disable=not progress_bar, desc="eval")
-    flat = not getattr(env, "is_planner", False)  # FlyAgent policies see drones as a batch
+    flat = env.flat_drones  # FlyAgent policies see drones as a batch
     while int(done_count.min()) < quota:
         actions = act(flatten_drones(obs)).view(E, N, 2) if flat else act(obs)
         obs, rewards, terms, truncs, info = env.step(actions)
@@ -119,11 +119,10 @@ def write_outputs(episodes: dict, out_dir: Path, title: str) -> dict:
     return summary
 
 
-def flyagent_json(summary: dict, planner: bool = False) -> dict:
-    """The issue's eval JSON: episodes, success_rate, failure_rates (collision, boundary, timeout; the planner
-    adds burnout), tte."""
+def flyagent_json(summary: dict, reasons: tuple[str, ...] = ("collision", "boundary", "timeout")) -> dict:
+    """The issue's eval JSON: episodes, success_rate, failure_rates (the env's ``failure_reasons``: collision,
+    boundary, timeout; the planner adds burnout), tte."""
     fr = summary["failure_rates"]
-    reasons = ("collision", "boundary", "timeout") + (("burnout",) if planner else ())
     return {"episodes": summary["episodes"], "success_rate": summary["success_rate"],
             "failure_rates": {k: fr.get(k, 0.0) for k in reasons},
             "tte": {k: summary["tte"][k] for k in ("mean", "std", "median")}}
@@ -149,7 +148,7 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         frames_dir = Path(scratch.name)
     eps = run_episodes(env, policy_fn(agent), episodes, seed, frames_dir, progress_bar)
     base_eps = None
-    if baseline is not None and getattr(env, "is_planner", False):
+    if baseline is not None and not env.flat_drones:  # the planner's baselines: greedy, random
         if baseline not in BASELINES:
             raise ValueError(f"--baseline: expected one of {', '.join(BASELINES)}, got {baseline!r}")
         # The heuristic runs in its own env with the same seed and env count: identical fire layouts and wind.
@@ -168,13 +167,12 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         scalars = read_tensorboard_scalars(tb)
         if scalars:
             plot_learning_curves(scalars, out / "learning_curves.png")
-    is_planner = getattr(env, "is_planner", False)
-    payload = flyagent_json(summary, is_planner)
+    payload = flyagent_json(summary, env.failure_reasons)
     if base_eps is not None:
         base = write_outputs(base_eps, out / baseline, f"{baseline} baseline ({len(base_eps['reward'])} episodes, "
                                                          f"seed {seed})")
         plot_comparison({"policy": eps, baseline: base_eps}, out)
-        payload = {"policy": payload, baseline: flyagent_json(base, is_planner)}
+        payload = {"policy": payload, baseline: flyagent_json(base, env.failure_reasons)}
         summary["baseline"] = base
     if json_path is not None:
         Path(json_path).parent.mkdir(parents=True, exist_ok=True)

@@ -1,0 +1,148 @@
+"""The vector-env core every level shares: the map and simulators, the torch buffers the kernels write, the
+reset / step skeleton with Gymnasium's same-step autoreset, the action checks, rendering and close.
+
+A level (:class:`roshan.env.fly.FlyVectorEnv`, :class:`roshan.env.planner.PlannerVectorEnv`) is a thin layer
+on :class:`VectorEnvCore`: its spaces, the views that make its observation dict out of one buffer, and the
+body of one step (:meth:`VectorEnvCore._advance`). Its kernels derive from
+:class:`roshan.kernels.episode.EpisodeKernels`, whose restart kernel the core launches.
+
+Callers tell the levels apart by what they need to know, not by type: :attr:`VectorEnvCore.flat_drones` says
+how actions are shaped, :attr:`VectorEnvCore.failure_reasons` which failures the records can hold.
+"""
+
+from collections.abc import Callable
+
+import gymnasium as gym
+import numpy as np
+import torch
+from gymnasium.vector import AutoresetMode
+
+from roshan.config import Config
+from roshan.episode import EPISODE_FIELDS
+from roshan.kernels.pool import FlySims, PlannerSims
+from roshan.maps import LandCoverMap, load_map
+from roshan.runtime import ensure_taichi, torch_device
+
+
+class VectorEnvCore(gym.vector.VectorEnv):
+    """E environments of one level as one Gymnasium vector env whose tensors are shared with torch.
+
+    Every call returns the same tensor objects: observation views into one buffer, rewards, terminations and
+    truncations (E,) (a time-out truncates). ``info`` holds ``final_obs`` (the observation of envs that ended
+    this step, same layout), ``episode_stats`` (a dict of (E,) tensors, :data:`roshan.episode.EPISODE_FIELDS`)
+    and ``_episode_stats`` (the (E,) bool mask of envs whose episode ended).
+
+    A subclass defines :meth:`_take_simulators` (its bundle from :mod:`roshan.kernels.pool`), calls
+    :meth:`_allocate_buffers`, and defines :meth:`_views`, :meth:`_kernel_obs` and :meth:`_advance`.
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": ["rgb_array"]}
+    # True: actions are one (E, N, 2) velocity per drone and a policy sees the drones as one batch of E * N
+    # (roshan.algos.networks.flatten_drones); False: actions are one decision per env, (E, N) indices.
+    flat_drones = True
+    failure_reasons = ("collision", "boundary", "timeout")  # the failures an episode record can hold
+
+    def __init__(self, num_envs: int, config: Config | None, seed: int | None, render_mode: str | None):
+        ensure_taichi()
+        self.config = cfg = config or Config()
+        self.render_mode = render_mode
+        self.num_envs = num_envs
+        self.num_drones = cfg.drones.num_drones
+        self.device = torch.device(torch_device())
+        self.land = load_map(cfg.map.name, band=cfg.map.band or None, rows=cfg.map.uniform_rows,
+                             cols=cfg.map.uniform_cols)
+        # The simulators of an earlier, closed env of the same build when there is one: no new fields, no compiling.
+        sims, self._give_back_sims = self._take_simulators(self.land, cfg.sim.seed if seed is None else seed)
+        self.fire, self.drones, self.kernels, self._viewer = sims.fire, sims.drones, sims.kernels, sims.viewer
+        self.t_max = sims.t_max
+        self._has_reset = False
+
+    # ------------------------------------------------------------------------------------------ construction
+
+    def _take_simulators(self, land: LandCoverMap, seed: int) -> tuple[FlySims | PlannerSims, Callable[[], None]]:
+        """The level's simulator bundle (fire, drone groups, task kernels, renderer) and the call that gives it
+        back to the pool: the one place simulators are made (roshan.kernels.pool builds or reuses them)."""
+        raise NotImplementedError
+
+    def _allocate_buffers(self, obs_shape: tuple[int, ...], reward_shape: tuple[int, ...]) -> None:
+        """The tensors the kernels write: observations (E, *obs_shape) and their final copy, rewards
+        (E, *reward_shape), done flags, episode records; the views and info dict handed out."""
+        E, dev = self.num_envs, self.device
+        self._obs_buf = torch.zeros((E, *obs_shape), dtype=torch.float32, device=dev)
+        self._final_buf = torch.zeros_like(self._obs_buf)
+        self._rewards = torch.zeros((E, *reward_shape), dtype=torch.float32, device=dev)
+        self._dones = torch.zeros((E, 2), dtype=torch.uint8, device=dev)
+        self._episode = torch.zeros((E, len(EPISODE_FIELDS)), dtype=torch.float32, device=dev)
+        self._obs = self._views(self._obs_buf)
+        done_bool = self._dones.view(torch.bool)
+        self.terminations, self.truncations = done_bool[:, 0], done_bool[:, 1]
+        # "episode_stats", not "episode": gymnasium's RecordEpisodeStatistics writes info["episode"] itself.
+        self._info = {"final_obs": self._views(self._final_buf),
+                      "episode_stats": {k: self._episode[:, i] for i, k in enumerate(EPISODE_FIELDS)}}
+
+    def _batched_spaces(self) -> None:
+        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = gym.vector.utils.batch_space(self.single_action_space, self.num_envs)
+
+    # ------------------------------------------------------------------------------------------ the level
+
+    def _views(self, buf: torch.Tensor) -> dict[str, torch.Tensor]:
+        """The observation dict: views of ``buf`` (the observation buffer or its final copy)."""
+        raise NotImplementedError
+
+    def _kernel_obs(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """What the restart kernel writes: observation rows (E, W), their final copy (E, W), the FlyAgent frame
+        stacks of the drones and of the explorers."""
+        raise NotImplementedError
+
+    def _advance(self, actions) -> None:
+        """One step of every env: check ``actions``, run the level's kernels (rewards, dones, records)."""
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------------------------------ gymnasium
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Start new episodes in every env; ``seed`` restarts every random stream from that seed."""
+        super().reset(seed=seed)
+        if seed is not None:
+            self.fire.seed = int(seed)
+            self.fire.episode.fill(-1)
+        self.kernels.reset_all(*self._kernel_obs(), self.fire.seed_key)
+        self._episode.zero_()
+        self._dones.zero_()
+        self._has_reset = True
+        return self._obs, {}
+
+    @torch.no_grad()
+    def step(self, actions):
+        """Advance every env by one step; envs that end are reset in the same call."""
+        if not self._has_reset:
+            raise gym.error.ResetNeeded(f"{type(self).__name__}.step() before reset(): call reset() first")
+        self._advance(actions)
+        # On the CPU, reading the done flags costs microseconds and saves the reset launch (~150 us) in the
+        # many steps where no episode ends; on a GPU that read would synchronise, so always launch.
+        if self.device.type != "cpu" or bool(self._dones.any()):
+            self.kernels.restart(*self._kernel_obs(), self.fire.seed_key, 1)
+        info = dict(self._info)
+        info["_episode_stats"] = self.terminations | self.truncations
+        info["_final_obs"] = info["_episode_stats"]
+        return self._obs, self._rewards, self.terminations, self.truncations, info
+
+    def _actions_tensor(self, actions, want: tuple[int, ...], axes: str) -> torch.Tensor:
+        """``actions`` (torch, numpy or nested lists) as a tensor of shape ``want`` (its axes named in errors)."""
+        if isinstance(actions, np.ndarray):
+            actions = torch.from_numpy(actions)
+        elif not isinstance(actions, torch.Tensor):
+            actions = torch.as_tensor(np.asarray(actions))
+        if tuple(actions.shape) != want:
+            raise ValueError(f"actions: expected shape {want} ({axes}), got {tuple(actions.shape)}")
+        return actions
+
+    def render(self):
+        """An RGB frame (H, W, 3) uint8 of env 0: land cover, fire, particles, drones, goals, groundstation."""
+        return self._viewer.render()
+
+    def close(self, **kwargs):
+        """Give the simulators back to the pool (idempotent); the env must not be stepped afterwards."""
+        self._viewer.close()
+        self._give_back_sims()
