@@ -1,0 +1,1 @@
+"""Training runs: the loop, collectors, evaluation and reports of run folders."""
