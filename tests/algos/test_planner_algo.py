@@ -6,7 +6,7 @@ import torch
 from roshan.algos.agents import planner_ppo
 from roshan.algos.planner_nets import PointerPlannerNet, ThesisPlannerNet, trim_candidates
 from roshan.algos.ppo import PPO, Rollout
-from roshan.config import PPOConfig
+from roshan.config import PPOConfig, RNDConfig
 
 NETS = [ThesisPlannerNet, PointerPlannerNet]
 
@@ -215,3 +215,15 @@ def test_state_dict_round_trip_gives_identical_outputs(network):
     assert torch.equal(a.act_deterministic(obs), b.act_deterministic(obs))
     assert b.updates == 1 and b.gradient_steps == a.gradient_steps and b.scaler.count == a.scaler.count
     assert b.optimizers[0].state_dict()["state"].keys() == a.optimizers[0].state_dict()["state"].keys()
+
+
+def test_planner_rnd_reads_drones_goals_water_and_globals():
+    g = torch.Generator().manual_seed(8)
+    agent = planner_ppo(PPOConfig(horizon=32, batch_size=16), "thesis", num_drones=3,
+                        rnd=RNDConfig(enabled=True, hidden=16, out=8))
+    obs = random_obs(8, 3, 6, g)
+    features = agent.policy.novelty_features(obs)
+    assert features.shape == (8, agent.policy.novelty_dim) == (8, 5 * 3 + 5)
+    torch.testing.assert_close(features[:, -5:], obs["globals"])
+    metrics = agent.update(bandit_rollout(agent, obs, 4, g), g)
+    assert metrics["rnd_intrinsic"] > 0 and metrics["rnd_loss"] > 0
