@@ -19,7 +19,7 @@ from pathlib import Path
 
 import torch
 
-from roshan.config import Config, ConfigError, from_dict, to_dict
+from roshan.config import Config, ConfigError, from_dict, to_dict, upgrade_config_dict
 
 CHECKPOINTS = ("latest", "best_reward", "best_objective", "best_eval")
 # What "best" means for evaluation: the periodic deterministic evaluation when the run had one (it measures the
@@ -90,12 +90,25 @@ def load_checkpoint(path: str | Path) -> dict:
         raise ValueError(f"{path}: not a readable ROSHAN checkpoint ({type(exc).__name__}: {exc})") from exc
     if not isinstance(state, dict) or "config" not in state or "algo" not in state:
         raise ValueError(f"{path}: not a ROSHAN checkpoint (no 'config'/'algo' entries)")
+    return upgrade_checkpoint(state)
+
+
+def upgrade_checkpoint(state: dict) -> dict:
+    """A checkpoint of an earlier version in the current layout: the config dict through
+    :func:`roshan.config.upgrade_config_dict`, and the planner PPO's single ``optimizer`` / ``scheduler`` as the
+    lists of the one PPO class (the network weights are untouched)."""
+    state = {**state, "config": upgrade_config_dict(state["config"])}
+    agent = state.get("agent")
+    if state["algo"] == "planner" and isinstance(agent, dict) and "optimizer" in agent:
+        agent = {k: v for k, v in agent.items() if k not in ("optimizer", "scheduler")}
+        state["agent"] = {**agent, "optimizers": [state["agent"]["optimizer"]],
+                          "schedulers": [state["agent"]["scheduler"]]}
     return state
 
 
 def config_of_checkpoint(state: dict, where: str) -> Config:
     try:
-        return from_dict(Config, state["config"], where=where)
+        return from_dict(Config, upgrade_config_dict(state["config"]), where=where)
     except ConfigError as exc:
         raise ValueError(f"{where}: the checkpoint's config does not fit this version ({exc})") from exc
 
@@ -106,7 +119,8 @@ def check_same_model(cfg: Config, saved: Config, where: str) -> None:
             "fly.frames": (cfg.fly.frames, saved.fly.frames),
             "drones.num_drones": (cfg.drones.num_drones, saved.drones.num_drones),
             "train.algo": (cfg.train.algo, saved.train.algo),
-            "ppo.share_encoder": (cfg.ppo.share_encoder, saved.ppo.share_encoder)}
+            "ppo.share_encoder": (cfg.ppo.share_encoder, saved.ppo.share_encoder),
+            "planner.network": (cfg.planner.network, saved.planner.network)}
     bad = [f"{k} = {a!r} here but {b!r} in the checkpoint" for k, (a, b) in keys.items() if a != b]
     if bad:
         raise ValueError(f"{where}: checkpoint from another config: " + "; ".join(bad))

@@ -1,21 +1,34 @@
-"""Which algorithm object a config asks for (``train.algo``), with fresh networks."""
+"""Which agent a config asks for (``train.algo``), with fresh networks."""
 
 import torch
 
+from roshan.algos.agent import Agent
 from roshan.algos.iql import IQL
-from roshan.algos.planner import PlannerPPO
+from roshan.algos.policies import FlyPolicy, PlannerPolicy
 from roshan.algos.ppo import PPO
 from roshan.algos.td3 import TD3
-from roshan.config import Config
+from roshan.config import Config, PPOConfig, RNDConfig
 
 
-def make_agent(cfg: Config, device: str | torch.device = "cpu"):
-    """PPO, TD3, IQL or the planner's PPO for ``cfg.train.algo``."""
+def fly_ppo(cfg: PPOConfig, collision: bool, frames: int = 3, device: str | torch.device = "cpu",
+            rnd: RNDConfig | None = None) -> PPO:
+    """PPO over the FlyAgent actor-critic."""
+    return PPO(cfg, FlyPolicy(cfg, collision, frames), device, rnd)
+
+
+def planner_ppo(cfg: PPOConfig, network: str, num_drones: int, device: str | torch.device = "cpu",
+                rnd: RNDConfig | None = None) -> PPO:
+    """PPO over a planner network (``planner.network``)."""
+    return PPO(cfg, PlannerPolicy(network, num_drones), device, rnd)
+
+
+def make_agent(cfg: Config, device: str | torch.device = "cpu") -> Agent:
+    """PPO (FlyAgent or planner policy), TD3 or IQL for ``cfg.train.algo``."""
     collision, frames = cfg.fly.collision, cfg.fly.frames
     if cfg.train.algo == "ppo":
-        return PPO(cfg.ppo, collision, frames, device)
+        return fly_ppo(cfg.ppo, collision, frames, device, cfg.rnd)
     if cfg.train.algo == "planner":
-        return PlannerPPO(cfg.planner_ppo, cfg.drones.num_drones, device)
+        return planner_ppo(cfg.ppo, cfg.planner.network, cfg.drones.num_drones, device, cfg.rnd)
     if cfg.train.algo == "td3":
         return TD3(cfg.td3, collision, frames, device)
     return IQL(cfg.iql, collision, frames, device)

@@ -8,6 +8,13 @@ from torch.nn import functional as F
 EDGE = 1e-6  # stored actions are clamped to +-(1 - EDGE) before atanh
 
 
+def normal(base: torch.distributions.Normal, generator: torch.Generator | None) -> torch.Tensor:
+    """A sample of ``base`` from ``generator``: ``Normal.sample`` takes none, and with ``generator = None`` this is
+    the same ``torch.normal`` call on the same global RNG stream."""
+    with torch.no_grad():
+        return torch.normal(base.loc, base.scale, generator=generator)
+
+
 class ClippedGaussian:
     """a ~ N(mean, std) clamped to [-1, 1]; the log-prob is the Gaussian density at the clamped action."""
 
@@ -18,8 +25,9 @@ class ClippedGaussian:
         return self.base.sample().clamp(-1.0, 1.0)
 
     # The "raw" interface: what a learner stores is the clamped action itself.
-    def sample_raw(self) -> torch.Tensor:
-        return self.sample()
+    def sample_raw(self, generator: torch.Generator | None = None) -> torch.Tensor:
+        """A clamped sample; without ``generator`` it draws from torch's global RNG, exactly as ``sample``."""
+        return normal(self.base, generator).clamp(-1.0, 1.0)
 
     def log_prob_raw(self, raw: torch.Tensor) -> torch.Tensor:
         return self.log_prob(raw)
@@ -62,8 +70,8 @@ class TanhNormal:
     # a stored tanh(u) breaks once |u| > ~7.3, where tanh(u) rounds to 1 in float32 and the clamp to 1 - 1e-6
     # maps every such u to 7.25: old and new log-probs then disagree wildly (our first collision run collapsed
     # with approx KL ~1e5 after 1.5M steps; the reference inverts the clamped action, learning.md 4).
-    def sample_raw(self) -> torch.Tensor:
-        return self.base.sample()
+    def sample_raw(self, generator: torch.Generator | None = None) -> torch.Tensor:
+        return normal(self.base, generator)
 
     def log_prob_raw(self, u: torch.Tensor) -> torch.Tensor:
         """log p(tanh(u)) from u itself: [B, A] -> [B]."""

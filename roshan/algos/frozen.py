@@ -5,9 +5,8 @@ from pathlib import Path
 
 import torch
 
+from roshan.algos.agent import Agent
 from roshan.algos.agents import make_agent
-from roshan.algos.planner import PlannerPPO
-from roshan.algos.ppo import PPO
 from roshan.checkpoints import config_of_checkpoint, load_checkpoint, resolve_checkpoint
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -23,14 +22,10 @@ def load_agent(target: str | Path, which: str = "best", device: str | torch.devi
     return cfg, agent, path
 
 
-def policy_fn(agent):
-    """Deterministic actions from a batch of observations, whatever the algorithm: (B, 2) from flattened drone
-    observations for FlyAgents, (E, N) candidate indices for the planner."""
-    if isinstance(agent, PlannerPPO):
-        return lambda obs: agent.act(obs, deterministic=True)[0]
-    if isinstance(agent, PPO):
-        return agent.act_mode
-    return lambda obs: agent.act(obs)
+def policy_fn(agent: Agent):
+    """Deterministic actions from a batch of observations: (B, 2) from flattened drone observations for
+    FlyAgents, (E, N) candidate indices for the planner."""
+    return agent.act_deterministic
 
 
 class FrozenFlyPolicy:

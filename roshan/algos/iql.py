@@ -70,11 +70,15 @@ class IQL:
         self.iterations = 0  # gradient steps (minibatches) done
 
     @torch.no_grad()
-    def act(self, obs: dict[str, torch.Tensor], explore: bool = False,
-            generator: torch.Generator | None = None) -> torch.Tensor:
-        """Deterministic actions tanh(mu) (B, 2): the TanhNormal mode, and in Gaussian mode the mean, which is
-        tanh(mu) too (learning.md 2.3). ``explore`` and ``generator`` are ignored: the reference computes a
+    def act(self, obs: dict[str, torch.Tensor], generator: torch.Generator | None = None) -> torch.Tensor:
+        """The online-phase actions: :meth:`act_deterministic`, ``generator`` unused. The reference computes a
         noisy copy and then executes the noise-free action (learning.md 4)."""
+        return self.act_deterministic(obs)
+
+    @torch.no_grad()
+    def act_deterministic(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        """tanh(mu) (B, 2): the TanhNormal mode, and in Gaussian mode the mean, which is tanh(mu) too
+        (learning.md 2.3)."""
         return torch.tanh(self.actor(to_device(obs, self.device)))
 
     def log_prob(self, obs: dict[str, torch.Tensor], actions: torch.Tensor) -> torch.Tensor:

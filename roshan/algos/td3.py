@@ -69,14 +69,16 @@ class TD3:
         return len(buffer) >= self.cfg.min_memory_size
 
     @torch.no_grad()
-    def act(self, obs: dict[str, torch.Tensor], explore: bool = False,
-            generator: torch.Generator | None = None) -> torch.Tensor:
-        """Actions (B, 2) in [-1, 1]: mu(s), plus clipped N(0, exploration_noise^2) noise when ``explore``."""
+    def act(self, obs: dict[str, torch.Tensor], generator: torch.Generator | None = None) -> torch.Tensor:
+        """Exploring actions (B, 2) in [-1, 1]: mu(s) plus N(0, exploration_noise^2) noise, clipped."""
         actions = self.actor(to_device(obs, self.device))
-        if explore:
-            noise = self.cfg.exploration_noise * randn(tuple(actions.shape), generator, self.device)
-            actions = (actions + noise).clamp(-1.0, 1.0)
-        return actions
+        noise = self.cfg.exploration_noise * randn(tuple(actions.shape), generator, self.device)
+        return (actions + noise).clamp(-1.0, 1.0)
+
+    @torch.no_grad()
+    def act_deterministic(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        """mu(s) (B, 2) in [-1, 1]."""
+        return self.actor(to_device(obs, self.device))
 
     @torch.no_grad()
     def compute_target(self, batch: ReplayBatch, generator: torch.Generator | None = None) -> torch.Tensor:

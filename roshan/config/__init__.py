@@ -21,9 +21,9 @@ from roshan.config.agents import (
     RewardConfig,
 )
 from roshan.config.learning import (
+    FLY_ONLY_PPO_KEYS,
     IQLConfig,
     OptimConfig,
-    PlannerPPOConfig,
     PPOConfig,
     RNDConfig,
     TD3Config,
@@ -50,6 +50,7 @@ from roshan.config.sim import (
     SimConfig,
     WindConfig,
 )
+from roshan.config.upgrade import upgrade_config_dict
 
 
 @dataclass(frozen=True)
@@ -69,13 +70,27 @@ class Config:
     iql: IQLConfig = field(default_factory=IQLConfig)
     rnd: RNDConfig = field(default_factory=RNDConfig)
     planner: PlannerConfig = field(default_factory=PlannerConfig)
-    planner_ppo: PlannerPPOConfig = field(default_factory=PlannerPPOConfig)
+
+    def __post_init__(self):
+        if self.train.algo == "planner":
+            check_planner_ppo(self.ppo)
+
+
+def check_planner_ppo(ppo: PPOConfig) -> None:
+    """The planner is trained by the same PPO as the FlyAgent, but the FlyAgent policy's keys mean nothing to
+    it: refuse them rather than ignore them."""
+    default = PPOConfig()
+    for key in FLY_ONLY_PPO_KEYS:
+        value = getattr(ppo, key)
+        if value != getattr(default, key):
+            raise ConfigError(f"ppo.{key} = {value!r} applies to the FlyAgent policy only, not to train.algo = "
+                              f"planner (leave it at {getattr(default, key)!r}; the network is planner.network)")
 
 
 def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = (), cls: type = Config):
     """A YAML config (or the defaults) plus ``section.key=value`` overrides, validated (errors name the file and
     key); ``cls`` is the root :class:`Config` unless a caller loads one section on its own."""
-    return schema.load_config(path, overrides, cls=cls)
+    return schema.load_config(path, overrides, cls=cls, upgrade=upgrade_config_dict if cls is Config else None)
 
 
 def all_keys(cls: type = Config, prefix: str = "") -> list[str]:
@@ -89,8 +104,8 @@ load_run_config = load_config
 __all__ = [
     "CONTROLLERS", "PLANNER_NEWEST_TERMS", "PLANNER_PRESETS", "PRESETS", "Config", "ConfigError",
     "ConvectionConfig", "DroneConfig", "FireConfig", "FlyConfig", "IQLConfig", "IgnitionConfig", "MapConfig",
-    "OptimConfig", "PPOConfig", "PlannerConfig", "PlannerPPOConfig", "PlannerRewardConfig", "RNDConfig",
+    "FLY_ONLY_PPO_KEYS", "OptimConfig", "PPOConfig", "PlannerConfig", "PlannerRewardConfig", "RNDConfig",
     "RadiationConfig", "RewardConfig", "SimConfig", "TD3Config", "TrainConfig", "WindConfig", "all_keys",
     "apply_overrides", "choice", "dump_config", "from_dict", "load_config", "load_run_config", "num", "replace",
-    "suggest", "to_dict",
+    "suggest", "to_dict", "upgrade_config_dict",
 ]

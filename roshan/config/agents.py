@@ -105,4 +105,6 @@ class PlannerConfig:
     time_limit: str = choice("newest", ("newest", "thesis"))  # T_max formulas of agents.md 5
     burnout: float = num(0.30, 0.0, 1.0, doc="burned-out fraction that fails the episode")
     max_candidates: int = num(0, 0, doc="candidate list length K (groundstation included); 0 = every cell + 1")
+    network: str = choice("thesis", ("thesis", "pointer"), doc="the planner network: learning.md 3.1 (thesis) or "
+                                                              "3.2 (pointer, newest)")
     rewards: PlannerRewardConfig = field(default_factory=PlannerRewardConfig)

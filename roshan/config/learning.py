@@ -47,12 +47,19 @@ class OptimConfig:
     min_lr: float = num(0.0, 0.0, doc="cosine: eta_min")
 
 
+# PPO keys that only the FlyAgent policy reads (its distribution, log-std schedule, encoders, minibatch shape).
+FLY_ONLY_PPO_KEYS = ("log_std", "decay_rate", "share_encoder", "use_tanh_dist", "separate_optimizers", "minibatch")
+
+
 @dataclass(frozen=True)
 class PPOConfig:
-    """PPO hyperparameters; defaults are thesis Table 5.2 (E1)."""
+    """PPO hyperparameters of either level (``train.algo`` ppo: the FlyAgent; planner: the PlannerAgent). Defaults
+    are thesis Table 5.2 (E1, FlyAgent); the planner's Table 5.8 values are set in configs/planner*.yaml. The keys
+    in :data:`FLY_ONLY_PPO_KEYS` shape the FlyAgent policy and are refused for the planner."""
 
     lr: float = num(1.575e-4, 0.0, lo_open=True)
-    horizon: int = num(1200, 1, doc="transitions (all drones) collected per update")
+    horizon: int = num(1200, 1, doc="transitions collected per update (FlyAgent: all drones' steps; planner: "
+                                    "all envs' decisions)")
     batch_size: int = num(300, 1, doc="minibatch size in transitions")
     k_epochs: int = num(3, 1)
     gamma: float = num(0.9635, 0.0, 1.0)
@@ -74,29 +81,6 @@ class PPOConfig:
     minibatch: str = choice("samples", ("samples", "sequences"),
                             doc="samples: shuffled transitions (the reference); sequences: shuffled drones with "
                                 "their whole rollout, so each stacked frame is encoded once (about 3x cheaper)")
-    optim: OptimConfig = field(default_factory=OptimConfig)
-
-
-@dataclass(frozen=True)
-class PlannerPPOConfig:
-    """Planner PPO hyperparameters; defaults are thesis Table 5.8 / the P3 configuration (learning.md 14.3)."""
-
-    lr: float = num(1e-4, 0.0, lo_open=True)
-    horizon: int = num(4800, 1, doc="planner transitions (all envs) collected per update")
-    batch_size: int = num(1200, 1, doc="minibatch size in planner transitions")
-    k_epochs: int = num(3, 1)
-    gamma: float = num(0.99, 0.0, 1.0, doc="Table 5.8 (the P3 config file has 0.999)")
-    lam: float = num(0.98, 0.0, 1.0, doc="GAE lambda")
-    eps_clip: float = num(0.2, 0.0, 1.0, lo_open=True)
-    value_loss_coef: float = num(0.001, 0.0)
-    entropy_coeff: float = num(0.0005, 0.0)
-    max_grad_norm: float = num(0.5, 0.0, doc="per parameter group; 0 = off (the thesis-era code never clipped)")
-    kl_early_stop: bool = False
-    kl_target: float = num(0.03, 0.0, lo_open=True)
-    kl_estimator: str = choice("k1", ("k1", "k2"))
-    network: str = choice("thesis", ("thesis", "pointer"), doc="learning.md 3.1 (thesis) or 3.2 (newest)")
-    reward_eps: float = num(1e-8, 0.0, doc="added to the running variance (thesis-era 1e-8, newest 1e-4)")
-    bootstrap_truncated: bool = True  # False: a timeout ends the trace like a terminal (the reference)
     optim: OptimConfig = field(default_factory=OptimConfig)
 
 

@@ -11,6 +11,7 @@ import dataclasses
 import difflib
 import types
 import typing
+from collections.abc import Callable
 from dataclasses import field
 from pathlib import Path
 from typing import Any
@@ -40,8 +41,10 @@ def choice(default, choices: tuple, doc=""):
 # ---------------------------------------------------------------------------------------------- loading
 
 
-def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = (), *, cls: type):
-    """Load ``path`` (YAML) into ``cls``, apply ``key.sub=value`` overrides and validate everything.
+def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = (), *, cls: type,
+                upgrade: Callable[[dict], dict] | None = None):
+    """Load ``path`` (YAML) into ``cls``, apply ``key.sub=value`` overrides and validate everything; ``upgrade``
+    brings the file's dict from an older layout first.
 
     Raises:
         ConfigError: naming the file, the key and what was expected.
@@ -60,6 +63,8 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
             raise ConfigError(f"{path}: not valid YAML ({exc})") from exc
         if not isinstance(data, dict):
             raise ConfigError(f"{path}: expected a mapping of sections at the top level, got {type(data).__name__}")
+    if upgrade is not None:
+        data = upgrade(data)
     for item in overrides:
         _apply_override(data, item, cls)
     return from_dict(cls, data, where=where)

@@ -23,8 +23,6 @@ from roshan.algos.agents import make_agent
 from roshan.algos.buffers import ReplayBuffer
 from roshan.algos.frozen import policy_fn
 from roshan.algos.networks import flatten_drones
-from roshan.algos.planner import PlannerRollout
-from roshan.algos.ppo import PPO, FrameCache, Rollout
 from roshan.checkpoints import (
     check_same_model,
     checkpoint_path,
@@ -38,6 +36,7 @@ from roshan.checkpoints import (
 from roshan.config import Config, apply_overrides, dump_config
 from roshan.env.fly import FlyVectorEnv
 from roshan.episode import EPISODE_FIELDS, FAILURES, REASONS
+from roshan.runs.collect import PPOLearner, rollout_steps
 from roshan.runs.envs import make_env
 from roshan.runs.evaluate import evaluate_run, run_episodes
 from roshan.runs.report.stats import evaluation_scalars, summarize
@@ -93,91 +92,6 @@ class EpisodeLog:
         self.window, self.episodes, self.recent = s["window"], s["episodes"], collections.deque(s["recent"])
 
 
-def ended_rows(ended: torch.Tensor, stats: torch.Tensor) -> np.ndarray:
-    """Episode records [n, len(EPISODE_FIELDS)] of the (t, env) entries flagged in ``ended`` [T, E]."""
-    return stats[ended].cpu().numpy()
-
-
-# ------------------------------------------------------------------------------------------------ PPO
-
-
-class PPOCollector:
-    """Rollout storage allocated once, filled by stepping the env with the current policy."""
-
-    def __init__(self, env: FlyVectorEnv, agent: PPO, steps: int):
-        self.env, self.agent, self.T = env, agent, steps
-        E, N = env.num_envs, env.num_drones
-        B = E * N
-        obs, _ = env.reset()
-        self.obs = obs
-        dev = env.device
-        self.buf_obs = {k: torch.zeros((steps, B, *v.shape[2:]), device=dev) for k, v in obs.items()}
-        z = lambda *s, dt=torch.float32: torch.zeros(s, dtype=dt, device=dev)  # noqa: E731
-        self.actions, self.log_probs, self.values = z(steps, B, 2), z(steps, B), z(steps, B)
-        self.rewards, self.trunc_values = z(steps, B), z(steps, B)
-        self.term, self.trunc = z(steps, B, dt=torch.bool), z(steps, B, dt=torch.bool)
-        self.ended = z(steps, E, dt=torch.bool)
-        self.stats = z(steps, E, len(EPISODE_FIELDS))
-        self.cache = FrameCache()
-        self.restarted = z(B, dt=torch.bool)
-
-    def reset(self, seed: int) -> None:
-        self.obs, _ = self.env.reset(seed=seed)
-
-    def collect(self) -> Rollout:
-        env, agent, N = self.env, self.agent, self.env.num_drones
-        bootstrap = agent.cfg.bootstrap_truncated
-        self.trunc_values.zero_()
-        self.cache.clear()  # the parameters changed in the last update
-        for t in range(self.T):
-            o = flatten_drones(self.obs)
-            a, logp, v, raw = agent.act_raw(o, cache=self.cache, restarted=self.restarted)
-            for k, x in o.items():
-                self.buf_obs[k][t].copy_(x)
-            self.actions[t], self.log_probs[t], self.values[t] = raw, logp, v
-            self.obs, r, term, trunc, info = env.step(a.view(env.num_envs, N, 2))
-            self.rewards[t] = r.flatten()
-            self.term[t] = term.repeat_interleave(N)
-            self.trunc[t] = trunc.repeat_interleave(N)
-            ended = info["_episode_stats"]
-            self.ended[t] = ended
-            self.restarted = ended.repeat_interleave(N)
-            if bool(ended.any()):
-                self.stats[t] = torch.stack([info["episode_stats"][k] for k in EPISODE_FIELDS], dim=-1)
-                if bootstrap and bool(trunc.any()):
-                    self.trunc_values[t] = agent.value(flatten_drones(info["final_obs"]))
-        last = agent.value(flatten_drones(self.obs))
-        next_values = torch.cat([self.values[1:], last.unsqueeze(0)])
-        next_values = torch.where(self.trunc, self.trunc_values, next_values)
-        return Rollout(self.buf_obs, self.actions, self.log_probs, self.values, next_values, self.rewards,
-                       self.term, self.trunc)
-
-
-def rollout_steps(cfg: Config) -> int:
-    """Env steps per PPO rollout: ``horizon`` transitions spread over envs x drones."""
-    per_step = cfg.train.num_envs * cfg.drones.num_drones
-    steps = cfg.ppo.horizon // per_step
-    if steps < 1 or steps * per_step != cfg.ppo.horizon:
-        raise ValueError(f"ppo.horizon = {cfg.ppo.horizon} must be a positive multiple of train.num_envs x "
-                         f"drones.num_drones = {per_step}")
-    return steps
-
-
-class PPOLearner:
-    """One iteration = a rollout of ``horizon`` transitions, then one PPO update."""
-
-    def __init__(self, cfg: Config, env: FlyVectorEnv, agent: PPO):
-        self.steps = rollout_steps(cfg)
-        self.collector = PPOCollector(env, agent, self.steps)
-        self.agent, self.env = agent, env
-
-    def iterate(self, generator: torch.Generator) -> tuple[int, dict, np.ndarray]:
-        rollout = self.collector.collect()
-        metrics = self.agent.update(rollout, generator)
-        rows = ended_rows(self.collector.ended, self.collector.stats)
-        return self.steps * self.env.num_envs, metrics, rows
-
-
 def next_observation(obs: dict, info: dict, ended: torch.Tensor) -> dict[str, torch.Tensor]:
     """Per-drone next observations (E*N, ...): the env's ``final_obs`` where the episode ended this step."""
     out = {}
@@ -187,17 +101,17 @@ def next_observation(obs: dict, info: dict, ended: torch.Tensor) -> dict[str, to
 
 
 class OffPolicyCollector:
-    """Steps the env with an off-policy agent's (noisy) actions into a replay buffer, one transition per drone;
-    ``not_done`` is 0 only at a real terminal (a timeout bootstraps from ``final_obs``)."""
+    """Steps the env with an off-policy agent's exploring actions (``act``) into a replay buffer, one transition
+    per drone; ``not_done`` is 0 only at a real terminal (a timeout bootstraps from ``final_obs``)."""
 
-    def __init__(self, env: FlyVectorEnv, agent, buffer, explore: bool):
-        self.env, self.agent, self.buffer, self.explore = env, agent, buffer, explore
+    def __init__(self, env: FlyVectorEnv, agent, buffer):
+        self.env, self.agent, self.buffer = env, agent, buffer
         self.obs, _ = env.reset()
 
     def step(self, generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         env, N = self.env, self.env.num_drones
         o = {k: v.clone() for k, v in flatten_drones(self.obs).items()}
-        actions = self.agent.act(o, explore=self.explore, generator=generator)
+        actions = self.agent.act(o, generator=generator)
         self.obs, rewards, terms, truncs, info = env.step(actions.view(env.num_envs, N, 2))
         ended = info["_episode_stats"]
         nxt = next_observation(self.obs, info, ended.repeat_interleave(N))
@@ -217,7 +131,7 @@ class TD3Learner:
         obs, _ = env.reset()
         shapes = {k: tuple(v.shape[2:]) for k, v in obs.items()}
         self.buffer = ReplayBuffer(cfg.td3.memory_size, shapes, device=env.device)
-        self.collector = OffPolicyCollector(env, agent, self.buffer, explore=True)
+        self.collector = OffPolicyCollector(env, agent, self.buffer)
         self.agent, self.env = agent, env
 
     def iterate(self, generator: torch.Generator) -> tuple[int, dict, np.ndarray]:
@@ -265,7 +179,7 @@ class IQLLearner:
             metrics["rewards_raw"] = float(self.buffer.rewards[:len(self.buffer)].mean())
             return 0, metrics, empty
         if self.collector is None:
-            self.collector = OffPolicyCollector(self.env, self.agent, self.buffer, explore=False)
+            self.collector = OffPolicyCollector(self.env, self.agent, self.buffer)
         rows = []
         for _ in range(self.cfg.iql.policy_freq):
             _, ended, stats = self.collector.step(generator)
@@ -276,71 +190,8 @@ class IQLLearner:
         return self.cfg.iql.policy_freq * self.env.num_envs, metrics, np.concatenate(rows) if rows else empty
 
 
-# ------------------------------------------------------------------------------------------------ planner
-
-
-class PlannerCollector:
-    """Planner rollouts: one transition per env and decision, stored [T, E, ...] (allocated once)."""
-
-    def __init__(self, env, agent, steps: int):
-        self.env, self.agent, self.T = env, agent, steps
-        E, N = env.num_envs, env.num_drones
-        obs, _ = env.reset()
-        self.obs = obs
-        dev = env.device
-        self.buf_obs = {k: torch.zeros((steps, *v.shape), device=dev) for k, v in obs.items()}
-        z = lambda *s, dt=torch.float32: torch.zeros(s, dtype=dt, device=dev)  # noqa: E731
-        self.actions = z(steps, E, N, dt=torch.long)
-        self.log_probs, self.values, self.rewards, self.trunc_values = (z(steps, E) for _ in range(4))
-        self.term, self.trunc, self.ended = (z(steps, E, dt=torch.bool) for _ in range(3))
-        self.stats = z(steps, E, len(EPISODE_FIELDS))
-
-    def collect(self, generator: torch.Generator):
-
-        env, agent = self.env, self.agent
-        self.trunc_values.zero_()
-        for t in range(self.T):
-            for k, x in self.obs.items():
-                self.buf_obs[k][t].copy_(x)
-            a, logp, v = agent.act(self.obs, generator=generator)
-            self.actions[t], self.log_probs[t], self.values[t] = a, logp, v
-            self.obs, r, term, trunc, info = env.step(a)
-            self.rewards[t], self.term[t], self.trunc[t] = r, term, trunc
-            ended = info["_episode_stats"]
-            self.ended[t] = ended
-            if bool(ended.any()):
-                self.stats[t] = torch.stack([info["episode_stats"][k] for k in EPISODE_FIELDS], dim=-1)
-                if agent.cfg.bootstrap_truncated and bool(trunc.any()):
-                    self.trunc_values[t] = agent.value(info["final_obs"])
-        last = agent.value(self.obs)
-        next_values = torch.cat([self.values[1:], last.unsqueeze(0)])
-        next_values = torch.where(self.trunc, self.trunc_values, next_values)
-        return PlannerRollout(self.buf_obs, self.actions, self.log_probs, self.values, next_values, self.rewards,
-                              self.term, self.trunc)
-
-
-class PlannerLearner:
-    """One iteration = ``planner_ppo.horizon`` decisions over the envs, then one PPO update. Steps count
-    decisions (each is ``planner.interval`` low-level steps of every env)."""
-
-    def __init__(self, cfg: Config, env, agent):
-        E = cfg.train.num_envs
-        self.steps = cfg.planner_ppo.horizon // E
-        if self.steps < 1 or self.steps * E != cfg.planner_ppo.horizon:
-            raise ValueError(f"planner_ppo.horizon = {cfg.planner_ppo.horizon} must be a positive multiple of "
-                             f"train.num_envs = {E}")
-        self.collector = PlannerCollector(env, agent, self.steps)
-        self.agent, self.env = agent, env
-
-    def iterate(self, generator: torch.Generator) -> tuple[int, dict, np.ndarray]:
-        rollout = self.collector.collect(generator)
-        metrics = self.agent.update(rollout, generator)
-        rows = ended_rows(self.collector.ended, self.collector.stats)
-        return self.steps * self.env.num_envs, metrics, rows
-
-
 def make_learner(cfg: Config, env, agent):
-    learners = {"ppo": PPOLearner, "td3": TD3Learner, "iql": IQLLearner, "planner": PlannerLearner}
+    learners = {"ppo": PPOLearner, "td3": TD3Learner, "iql": IQLLearner, "planner": PPOLearner}
     return learners[cfg.train.algo](cfg, env, agent)
 
 
@@ -370,7 +221,7 @@ class Trainer:
         self.cfg, self.run_dir = cfg, Path(run_dir)
         self.progress_bar, self.on_update = progress_bar, on_update
         tc = cfg.train
-        if tc.algo == "ppo":
+        if tc.algo in ("ppo", "planner"):
             rollout_steps(cfg)  # check the horizon before building anything
         self.generator = torch.Generator().manual_seed(tc.seed)
         torch.manual_seed(tc.seed)

@@ -8,10 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from roshan.algos.agents import make_agent
+from roshan.algos.agents import fly_ppo, make_agent
 from roshan.algos.frozen import load_agent
 from roshan.algos.networks import flatten_drones
-from roshan.algos.ppo import PPO, FrameCache
 from roshan.config import (
     Config,
     DroneConfig,
@@ -26,8 +25,8 @@ from roshan.config import (
 from roshan.env.fly import FlyVectorEnv
 from roshan.kernels.fire import FireSim
 from roshan.maps import LandCoverMap, load_map
+from roshan.runs.collect import PPOLearner
 from roshan.runs.envs import make_env
-from roshan.runs.train import PPOLearner
 
 REFERENCE_QUANTITIES = ("burning", "burned", "convection", "radiation")
 
@@ -301,18 +300,21 @@ def time_env(envs: int, drones: int, fire_percentage: float, steps: int, policy:
     cfg = Config(ignition=IgnitionConfig(fire_percentage=fire_percentage), drones=DroneConfig(num_drones=drones))
     env = FlyVectorEnv(envs, cfg, FlyConfig(policy="complex", collision=collision), seed=seed)
     obs, _ = env.reset(seed=seed)
-    cache, restarted = FrameCache(), None
     gen = torch.Generator().manual_seed(seed)
     if policy == "fly_collision":  # trained, deterministic: what evaluation runs
-        network = load_agent(SHIPPED_COLLISION_MODEL)[1].act_mode
+        fly = load_agent(SHIPPED_COLLISION_MODEL)[1].policy
+        cache = fly.new_cache()
+        network = lambda o: fly.act_deterministic(o, cache)  # noqa: E731
     elif policy is not None:  # untrained, sampling: what a rollout runs
-        agent = PPO(PPOConfig(use_tanh_dist=True), collision=policy == "collision")
-        network = lambda o, **kw: agent.act(o, **kw)[0]  # noqa: E731
+        agent = fly_ppo(PPOConfig(use_tanh_dist=True), collision=policy == "collision")
+        cache = agent.new_cache()
+        network = lambda o: agent.sample(o, cache=cache).action  # noqa: E731
 
+    @torch.no_grad()
     def act(o):
         if policy is None:
             return torch.rand((envs, drones, 2), generator=gen) * 2 - 1
-        return network(flatten_drones(o), cache=cache, restarted=restarted).view(envs, drones, 2)
+        return network(flatten_drones(o)).view(envs, drones, 2)
 
     for _ in range(3):
         obs, *_ = env.step(act(obs))
@@ -321,7 +323,8 @@ def time_env(envs: int, drones: int, fire_percentage: float, steps: int, policy:
     for _ in range(steps):
         obs, _, term, trunc, _ = env.step(act(obs))
         done = term | trunc
-        restarted = done.repeat_interleave(drones)
+        if policy is not None:
+            cache.restart(done.repeat_interleave(drones))
         ended += int(done.sum())
     elapsed = time.perf_counter() - t0
     return {"envs": envs, "drones": drones, "fire_percentage": fire_percentage, "policy": policy or "random",

@@ -256,19 +256,19 @@ def test_td3_updates_and_checkpoint_round_trip_reproduce_actions():
     obs = random_obs(8, torch.Generator().manual_seed(5))
     clone = TD3(cfg, collision=True)
     clone.load_state_dict(agent.state_dict())
-    assert torch.equal(clone.act(obs), agent.act(obs))
-    explore = agent.act(obs, explore=True, generator=torch.Generator().manual_seed(2))
-    assert torch.equal(clone.act(obs, explore=True, generator=torch.Generator().manual_seed(2)), explore)
-    assert not torch.equal(explore, agent.act(obs)) and explore.abs().max() <= 1.0
+    assert torch.equal(clone.act_deterministic(obs), agent.act_deterministic(obs))
+    explore = agent.act(obs, generator=torch.Generator().manual_seed(2))
+    assert torch.equal(clone.act(obs, generator=torch.Generator().manual_seed(2)), explore)
+    assert not torch.equal(explore, agent.act_deterministic(obs)) and explore.abs().max() <= 1.0
     # optimiser, scheduler, target and counter state came along: one more update stays identical
     agent.update(buf, torch.Generator().manual_seed(9))
     clone.update(buf, torch.Generator().manual_seed(9))
-    assert torch.equal(clone.act(obs), agent.act(obs))
+    assert torch.equal(clone.act_deterministic(obs), agent.act_deterministic(obs))
     with pytest.raises(ValueError, match="collision"):
         TD3(cfg, collision=False).load_state_dict(agent.state_dict())
     evaluator = TD3(cfg, collision=True)  # evaluation loads the networks only; targets are re-copied from them
     evaluator.load_state_dict(agent.state_dict(), weights_only=True)
-    assert torch.equal(evaluator.act(obs), agent.act(obs)) and evaluator.iterations == 0
+    assert torch.equal(evaluator.act_deterministic(obs), agent.act_deterministic(obs)) and evaluator.iterations == 0
     assert same(params(evaluator.critic_target), params(agent.critic))
 
 
@@ -303,7 +303,7 @@ def test_iql_actor_log_prob_uses_fixed_std(tanh):
     torch.manual_seed(0)
     agent = IQL(IQLConfig(use_tanh_dist=tanh), collision=False)
     obs = random_obs(4, torch.Generator().manual_seed(0))
-    mean = agent.act(obs)
+    mean = agent.act_deterministic(obs)
     std = math.exp(-3.0)
     gauss_peak = 2 * (-math.log(std) - 0.5 * math.log(2 * math.pi))  # log N(x; x, std) summed over 2 dims
     with torch.no_grad():
@@ -353,16 +353,17 @@ def test_iql_updates_and_checkpoint_round_trip_reproduce_actions(share):
     obs = random_obs(8, torch.Generator().manual_seed(5))
     clone = IQL(cfg, collision=True)
     clone.load_state_dict(agent.state_dict())
-    assert torch.equal(clone.act(obs), agent.act(obs))
-    assert torch.equal(agent.act(obs, explore=True), agent.act(obs))  # the reference executes noise-free actions
+    assert torch.equal(clone.act_deterministic(obs), agent.act_deterministic(obs))
+    # the reference executes noise-free actions online
+    assert torch.equal(agent.act(obs, generator=torch.Generator().manual_seed(1)), agent.act_deterministic(obs))
     agent.offline_pass(buf, torch.Generator().manual_seed(4))
     clone.offline_pass(buf, torch.Generator().manual_seed(4))
-    assert torch.equal(clone.act(obs), agent.act(obs))
+    assert torch.equal(clone.act_deterministic(obs), agent.act_deterministic(obs))
     with pytest.raises(ValueError, match="share_encoder"):
         IQL(IQLConfig(share_encoder=not share), collision=True).load_state_dict(agent.state_dict())
     evaluator = IQL(cfg, collision=True)
     evaluator.load_state_dict(agent.state_dict(), weights_only=True)
-    assert torch.equal(evaluator.act(obs), agent.act(obs)) and evaluator.passes == 0
+    assert torch.equal(evaluator.act_deterministic(obs), agent.act_deterministic(obs)) and evaluator.passes == 0
 
 
 # ---------------------------------------------------------------------------------------------- RND

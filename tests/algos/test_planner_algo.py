@@ -3,8 +3,10 @@
 import pytest
 import torch
 
-from roshan.algos.planner import PlannerPPO, PlannerRollout, PointerPlannerNet, ThesisPlannerNet, trim_candidates
-from roshan.config import PlannerPPOConfig
+from roshan.algos.agents import planner_ppo
+from roshan.algos.planner_nets import PointerPlannerNet, ThesisPlannerNet, trim_candidates
+from roshan.algos.ppo import PPO, Rollout
+from roshan.config import PPOConfig, RNDConfig
 
 NETS = [ThesisPlannerNet, PointerPlannerNet]
 
@@ -167,37 +169,31 @@ def test_thesis_joint_log_prob_is_the_sum_of_per_drone_categoricals():
 # ---------------------------------------------------------------------------------------------- PPO
 
 
-def bandit_rollout(agent: PlannerPPO, obs: dict, T: int, g: torch.Generator) -> PlannerRollout:
+def bandit_rollout(agent: PPO, obs: dict, T: int, g: torch.Generator) -> Rollout:
     """One-step episodes: reward 1 when drone 0 picks candidate 2 and drone 1 picks candidate 3."""
     E = obs["drones"].shape[0]
-    actions, logps, values = [], [], []
-    for _ in range(T):
-        a, lp, v = agent.act(obs, generator=g)
-        actions.append(a)
-        logps.append(lp)
-        values.append(v)
-    actions = torch.stack(actions)
+    samples = [agent.sample(obs, generator=g) for _ in range(T)]
+    actions = torch.stack([s.action for s in samples])
     rewards = ((actions[..., 0] == 2) & (actions[..., 1] == 3)).float()
     done = torch.ones(T, E, dtype=torch.bool)
     stacked = {k: v.unsqueeze(0).expand(T, *v.shape) for k, v in obs.items()}
-    return PlannerRollout(stacked, actions, torch.stack(logps), torch.stack(values), torch.zeros(T, E), rewards,
-                          done, torch.zeros_like(done))
+    return Rollout(stacked, torch.stack([s.stored for s in samples]), torch.stack([s.log_prob for s in samples]),
+                   torch.stack([s.value for s in samples]), torch.zeros(T, E), rewards, done, torch.zeros_like(done))
 
 
 @pytest.mark.parametrize("network", ["thesis", "pointer"])
 def test_planner_ppo_learns_a_joint_bandit(network):
     torch.manual_seed(0)
     g = torch.Generator().manual_seed(5)
-    cfg = PlannerPPOConfig(lr=3e-3, horizon=8 * 16, batch_size=64, k_epochs=4, entropy_coeff=0.0,
-                           value_loss_coef=0.5, network=network)
-    agent = PlannerPPO(cfg, num_drones=2)
+    cfg = PPOConfig(lr=3e-3, horizon=8 * 16, batch_size=64, k_epochs=4, entropy_coeff=0.0, value_loss_coef=0.5)
+    agent = planner_ppo(cfg, network, num_drones=2)
     one = random_obs(1, 2, 4, g, n_valid=torch.tensor([4]))  # one fixed scene, seen by 16 envs
     obs = {k: v.expand(16, *v.shape[1:]) for k, v in one.items()}
     first = float(bandit_rollout(agent, obs, 8, g).rewards.mean())
     for _ in range(20):
         metrics = agent.update(bandit_rollout(agent, obs, 8, g), g)
     assert all(v == v for k, v in metrics.items() if k != "explained_variance"), metrics  # no NaN
-    actions = agent.act(obs, deterministic=True)[0]
+    actions = agent.act_deterministic(obs)
     assert first < 0.3
     assert bool((actions == torch.tensor([2, 3])).all()), actions
     assert agent.updates == 20 and agent.gradient_steps == 20 * 4 * 2
@@ -207,14 +203,27 @@ def test_planner_ppo_learns_a_joint_bandit(network):
 def test_state_dict_round_trip_gives_identical_outputs(network):
     torch.manual_seed(0)
     g = torch.Generator().manual_seed(6)
-    cfg = PlannerPPOConfig(horizon=32, batch_size=16, network=network)
-    a = PlannerPPO(cfg, num_drones=3)
+    cfg = PPOConfig(horizon=32, batch_size=16)
+    a = planner_ppo(cfg, network, num_drones=3)
     a.update(bandit_rollout(a, random_obs(8, 3, 6, g), 4, g), g)
-    b = PlannerPPO(cfg, num_drones=3)
+    b = planner_ppo(cfg, network, num_drones=3)
     b.load_state_dict(a.state_dict())
     obs = random_obs(16, 3, 6, g)
-    actions, logp, value = a.act(obs, generator=torch.Generator().manual_seed(7))
-    b_actions, b_logp, b_value = b.act(obs, generator=torch.Generator().manual_seed(7))
-    assert torch.equal(actions, b_actions) and torch.equal(logp, b_logp) and torch.equal(value, b_value)
+    sa = a.sample(obs, generator=torch.Generator().manual_seed(7))
+    sb = b.sample(obs, generator=torch.Generator().manual_seed(7))
+    assert all(torch.equal(x, y) for x, y in zip(sa, sb, strict=True))
+    assert torch.equal(a.act_deterministic(obs), b.act_deterministic(obs))
     assert b.updates == 1 and b.gradient_steps == a.gradient_steps and b.scaler.count == a.scaler.count
-    assert b.optimizer.state_dict()["state"].keys() == a.optimizer.state_dict()["state"].keys()
+    assert b.optimizers[0].state_dict()["state"].keys() == a.optimizers[0].state_dict()["state"].keys()
+
+
+def test_planner_rnd_reads_drones_goals_water_and_globals():
+    g = torch.Generator().manual_seed(8)
+    agent = planner_ppo(PPOConfig(horizon=32, batch_size=16), "thesis", num_drones=3,
+                        rnd=RNDConfig(enabled=True, hidden=16, out=8))
+    obs = random_obs(8, 3, 6, g)
+    features = agent.policy.novelty_features(obs)
+    assert features.shape == (8, agent.policy.novelty_dim) == (8, 5 * 3 + 5)
+    torch.testing.assert_close(features[:, -5:], obs["globals"])
+    metrics = agent.update(bandit_rollout(agent, obs, 4, g), g)
+    assert metrics["rnd_intrinsic"] > 0 and metrics["rnd_loss"] > 0

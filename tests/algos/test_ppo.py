@@ -5,9 +5,12 @@ import math
 import pytest
 import torch
 
+from roshan.algos.agents import fly_ppo
+from roshan.algos.distributions import ClippedGaussian, TanhNormal
+from roshan.algos.frames import FrameCache
 from roshan.algos.normalize import RewardScaler
-from roshan.algos.ppo import PPO, FrameCache, Rollout, approx_kl, clipped_surrogate, explained_variance
-from roshan.config import PPOConfig
+from roshan.algos.ppo import PPO, Rollout, approx_kl, clipped_surrogate, explained_variance
+from roshan.config import PPOConfig, RNDConfig
 
 
 def test_clipped_surrogate_by_hand():
@@ -71,17 +74,12 @@ def bandit_rollout(agent: PPO, T: int, B: int, g: torch.Generator) -> Rollout:
     targets = torch.rand(T, B, 2, generator=g) * 1.6 - 0.8
     obs = {k: torch.stack([bandit_obs(B, targets[t])[k] for t in range(T)]) for k in ("agent", "neighbors",
                                                                                            "neighbors_mask")}
-    acts, logps, values = [], [], []
-    for t in range(T):
-        a, lp, v = agent.act({k: v[t] for k, v in obs.items()})
-        acts.append(a)
-        logps.append(lp)
-        values.append(v)
-    actions = torch.stack(acts)
+    samples = [agent.sample({k: v[t] for k, v in obs.items()}) for t in range(T)]
+    actions = torch.stack([s.action for s in samples])
     rewards = -(actions - targets).pow(2).sum(-1)
     done = torch.ones(T, B, dtype=torch.bool)
-    return Rollout(obs, actions, torch.stack(logps), torch.stack(values), torch.zeros(T, B), rewards, done,
-                   torch.zeros_like(done))
+    return Rollout(obs, torch.stack([s.stored for s in samples]), torch.stack([s.log_prob for s in samples]),
+                   torch.stack([s.value for s in samples]), torch.zeros(T, B), rewards, done, torch.zeros_like(done))
 
 
 @pytest.mark.parametrize("minibatch", ["samples", "sequences"])
@@ -90,13 +88,13 @@ def test_ppo_learns_a_contextual_bandit(minibatch):
     g = torch.Generator().manual_seed(1)
     cfg = PPOConfig(lr=3e-3, horizon=8 * 128, batch_size=256, k_epochs=4, entropy_coeff=0.0,
                     minibatch=minibatch)
-    agent = PPO(cfg, collision=False)
+    agent = fly_ppo(cfg, collision=False)
     first = float(bandit_rollout(agent, 8, 128, g).rewards.mean())
     for _ in range(40):
         agent.update(bandit_rollout(agent, 8, 128, g), g)
     with torch.no_grad():
         targets = torch.rand(512, 2, generator=g) * 1.6 - 0.8
-        mean = agent.act(bandit_obs(512, targets), deterministic=True)[0]
+        mean = agent.act_deterministic(bandit_obs(512, targets))
     err = float((mean - targets).pow(2).sum(-1).mean())
     assert first < -1.0  # std 1 exploration around a near-zero mean
     assert err < 0.02, f"deterministic action error {err}"
@@ -107,7 +105,7 @@ def test_kl_early_stop_skips_the_rest_of_each_epoch():
     g = torch.Generator().manual_seed(0)
     cfg = PPOConfig(horizon=4 * 64, batch_size=64, k_epochs=3, kl_early_stop=True, kl_target=1e-5, lr=1e-2,
                     kl_estimator="k2")  # k2 >= 0: any real change of the policy exceeds the target
-    agent = PPO(cfg, collision=False)
+    agent = fly_ppo(cfg, collision=False)
     metrics = agent.update(bandit_rollout(agent, 4, 64, g), g)
     # epoch 1: minibatch 1 sees KL ~ 0 (float noise only) and steps, minibatch 2 sees KL > 0 and stops the epoch;
     # epochs 2 and 3 stop at their first minibatch: one gradient step in all.
@@ -118,12 +116,12 @@ def test_kl_early_stop_skips_the_rest_of_each_epoch():
 def test_log_std_schedules():
     g = torch.Generator().manual_seed(0)
     rho = 0.9
-    agent = PPO(PPOConfig(horizon=64, batch_size=64, log_std="train_step_decay", decay_rate=rho), collision=False)
+    agent = fly_ppo(PPOConfig(horizon=64, batch_size=64, log_std="train_step_decay", decay_rate=rho), collision=False)
     assert not agent.net.log_std.requires_grad
     for k in range(3):
         agent.update(bandit_rollout(agent, 1, 64, g), g)
         assert float(agent.net.log_std[0]) == pytest.approx(-20.0 * (1.0 - (rho**k) ** 5))
-    agent = PPO(PPOConfig(horizon=64, batch_size=64, log_std="log_step_decay", decay_rate=rho), collision=False)
+    agent = fly_ppo(PPOConfig(horizon=64, batch_size=64, log_std="log_step_decay", decay_rate=rho), collision=False)
     for k in range(3):
         agent.update(bandit_rollout(agent, 1, 64, g), g)
         assert float(agent.net.log_std[0]) == pytest.approx((k + 1) * math.log(rho), abs=1e-6)
@@ -131,7 +129,7 @@ def test_log_std_schedules():
 
 def test_gradient_clipping_bounds_each_group():
     g = torch.Generator().manual_seed(0)
-    agent = PPO(PPOConfig(horizon=64, batch_size=64, k_epochs=1, max_grad_norm=1e-3, lr=1.0,
+    agent = fly_ppo(PPOConfig(horizon=64, batch_size=64, k_epochs=1, max_grad_norm=1e-3, lr=1.0,
                           optim=PPOConfig().optim.__class__(name="sgd", scheduler="none")), collision=False)
     before = {n: p.detach().clone() for n, p in agent.net.named_parameters()}
     agent.update(bandit_rollout(agent, 1, 64, g), g)
@@ -143,23 +141,21 @@ def test_gradient_clipping_bounds_each_group():
 
 def test_separate_optimizers_refuse_a_shared_encoder():
     with pytest.raises(ValueError, match="share_encoder"):
-        PPO(PPOConfig(separate_optimizers=True, share_encoder=True), collision=False)
+        fly_ppo(PPOConfig(separate_optimizers=True, share_encoder=True), collision=False)
 
 
 def test_state_dict_round_trip_reproduces_actions():
     g = torch.Generator().manual_seed(0)
-    a = PPO(PPOConfig(horizon=64, batch_size=32), collision=True)
+    a = fly_ppo(PPOConfig(horizon=64, batch_size=32), collision=True)
     a.update(bandit_rollout(a, 1, 64, g), g)
-    b = PPO(PPOConfig(horizon=64, batch_size=32), collision=True)
+    b = fly_ppo(PPOConfig(horizon=64, batch_size=32), collision=True)
     b.load_state_dict(a.state_dict())
     obs = bandit_obs(16, torch.rand(16, 2, generator=g))
-    torch.testing.assert_close(a.act(obs, deterministic=True)[0], b.act(obs, deterministic=True)[0])
+    torch.testing.assert_close(a.act_deterministic(obs), b.act_deterministic(obs))
     assert b.updates == 1 and b.scaler.count == a.scaler.count
 
 
 def test_tanh_normal_raw_log_prob_matches_and_survives_saturation():
-    from roshan.algos.distributions import TanhNormal
-
     dist = TanhNormal(torch.tensor([[0.3, -0.2]]), torch.tensor([0.5, 0.5]))
     u = torch.tensor([[0.4, -1.0]])
     torch.testing.assert_close(dist.log_prob_raw(u), dist.log_prob(torch.tanh(u)))
@@ -171,13 +167,60 @@ def test_tanh_normal_raw_log_prob_matches_and_survives_saturation():
 
 
 @pytest.mark.parametrize("tanh_dist", [False, True])
-def test_act_mode_is_the_deterministic_action(tanh_dist):
+def test_act_deterministic_is_the_distribution_mode(tanh_dist):
     g = torch.Generator().manual_seed(1)
-    agent = PPO(PPOConfig(horizon=64, batch_size=32, use_tanh_dist=tanh_dist), collision=True)
+    agent = fly_ppo(PPOConfig(horizon=64, batch_size=32, use_tanh_dist=tanh_dist), collision=True)
     with torch.no_grad():
         agent.net.mu.weight.mul_(400.0)  # push some means towards the action bounds
-    obs = bandit_obs(16, torch.rand(16, 2, generator=g) * 4 - 2)
-    expected = agent.act(obs, deterministic=True)[0]
-    assert (expected.abs() > 0.9).any()
-    torch.testing.assert_close(agent.act_mode(obs), expected, rtol=0, atol=0)
-    torch.testing.assert_close(agent.act_mode(obs, cache=FrameCache()), expected, rtol=0, atol=0)
+        obs = bandit_obs(16, torch.rand(16, 2, generator=g) * 4 - 2)
+        mean, std, _ = agent.net(obs)
+        expected = (TanhNormal if tanh_dist else ClippedGaussian)(mean, std).mode
+        assert (expected.abs() > 0.9).any()
+        torch.testing.assert_close(agent.act_deterministic(obs), expected, rtol=0, atol=0)
+        torch.testing.assert_close(agent.policy.act_deterministic(obs, FrameCache()), expected, rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("tanh_dist", [False, True])
+def test_sampling_without_a_generator_is_the_distributions_own_sample(tanh_dist):
+    """FlyAgent rollouts draw from torch's global RNG exactly as ``Normal.sample`` did (runs reproduce); a
+    generator makes the draw its own stream."""
+    agent = fly_ppo(PPOConfig(horizon=64, batch_size=32, use_tanh_dist=tanh_dist), collision=False)
+    obs = bandit_obs(16, torch.rand(16, 2) * 2 - 1)
+    with torch.no_grad():
+        mean, std, value = agent.net(obs)
+        torch.manual_seed(5)
+        sample = agent.sample(obs)
+        torch.manual_seed(5)
+        want = torch.distributions.Normal(mean, std.expand_as(mean)).sample()
+    dist = (TanhNormal if tanh_dist else ClippedGaussian)(mean, std)
+    want = want if tanh_dist else want.clamp(-1.0, 1.0)
+    torch.testing.assert_close(sample.stored, want, rtol=0, atol=0)
+    torch.testing.assert_close(sample.action, dist.to_action(want), rtol=0, atol=0)
+    torch.testing.assert_close(sample.log_prob, dist.log_prob_raw(want))
+    torch.testing.assert_close(sample.value, value)
+    a = agent.act(obs, generator=torch.Generator().manual_seed(2))
+    torch.testing.assert_close(agent.act(obs, generator=torch.Generator().manual_seed(2)), a, rtol=0, atol=0)
+    assert not torch.equal(a, agent.act(obs, generator=torch.Generator().manual_seed(3)))
+
+
+def test_rnd_adds_its_scaled_novelty_to_the_scaled_rewards_and_trains_its_predictor():
+    g = torch.Generator().manual_seed(0)
+    cfg = PPOConfig(horizon=64, batch_size=32, k_epochs=1)
+    assert fly_ppo(cfg, collision=False, rnd=RNDConfig(enabled=False)).rnd is None  # off: nothing changes
+    agent = fly_ppo(cfg, collision=False, rnd=RNDConfig(enabled=True, coef=0.5, hidden=16, out=8))
+    rollout = bandit_rollout(agent, 2, 32, g)
+    features = rollout.obs["agent"].flatten(0, 1).flatten(1)
+    with torch.no_grad():
+        raw = agent.rnd.intrinsic_reward(features)
+    predictor = [p.detach().clone() for p in agent.rnd.predictor.parameters()]
+    metrics = agent.update(rollout, g)
+    # the novelty is divided by its own running std (this batch merged first), times rnd.coef
+    want = 0.5 * raw.view(2, 32) / agent.rnd.scaler.std
+    assert metrics["rnd_intrinsic"] == pytest.approx(float(want.mean()), rel=1e-5)
+    scaled = rollout.rewards / agent.scaler.std
+    assert metrics["rewards_scaled"] == pytest.approx(float((scaled + want).mean()), rel=1e-5)
+    assert metrics["rnd_loss"] > 0 and any(not torch.equal(a, b) for a, b in
+                                           zip(predictor, agent.rnd.predictor.parameters(), strict=True))
+    clone = fly_ppo(cfg, collision=False, rnd=RNDConfig(enabled=True, coef=0.5, hidden=16, out=8))
+    clone.load_state_dict(agent.state_dict())
+    torch.testing.assert_close(clone.rnd.intrinsic_reward(features), agent.rnd.intrinsic_reward(features))

@@ -3,10 +3,11 @@ stacked observation, on real rollouts of the collision env (episodes restart ins
 
 import torch
 
-from roshan.algos.ppo import PPO, FrameCache, gather_stacks, stack_index
+from roshan.algos.agents import fly_ppo
+from roshan.algos.frames import FrameCache, gather_stacks, stack_index
 from roshan.config import Config, PPOConfig
+from roshan.runs.collect import DroneRows, RolloutCollector
 from roshan.runs.envs import make_env
-from roshan.runs.train import PPOCollector
 
 
 def collision_run(num_envs=4, horizon=4 * 4 * 24, **ppo):
@@ -35,8 +36,8 @@ def test_cached_acting_and_sequence_minibatches_match_full_encoding():
     torch.manual_seed(0)
     cfg = collision_run()
     env = make_env(cfg, cfg.train.num_envs, seed=5)
-    agent = PPO(cfg.ppo, collision=True)
-    collector = PPOCollector(env, agent, steps=24)
+    agent = fly_ppo(cfg.ppo, collision=True)
+    collector = RolloutCollector(env, agent, DroneRows(env.num_drones), steps=24)
     rollout = collector.collect()
     ended = rollout.terminations | rollout.truncations
     assert bool(ended[:-1].any()), "the rollout should contain episode restarts"
@@ -49,8 +50,8 @@ def test_cached_acting_and_sequence_minibatches_match_full_encoding():
         # the sequence path rebuilds every stack from distinct frames
         restart = torch.cat([torch.zeros_like(ended[:1]), ended[:-1]])
         cols = torch.tensor([0, 5, 9, B - 1])
-        mean, _, value = agent._forward_columns({k: v[:, cols] for k, v in rollout.obs.items()},
-                                                stack_index(restart, 3)[:, cols])
+        mean, _, value = agent.policy.forward_columns({k: v[:, cols] for k, v in rollout.obs.items()},
+                                                      stack_index(restart, 3)[:, cols])
         want_mean = torch.stack([f[0][cols] for f in full]).flatten(0, 1)
         want_value = torch.stack([f[2][cols] for f in full]).flatten(0, 1)
         torch.testing.assert_close(mean, want_mean, rtol=1e-5, atol=1e-5)
@@ -59,16 +60,17 @@ def test_cached_acting_and_sequence_minibatches_match_full_encoding():
 
 def test_frame_cache_restarted_rows_use_the_new_frame_only():
     cfg = collision_run()
-    agent = PPO(cfg.ppo, collision=True)
+    agent = fly_ppo(cfg.ppo, collision=True)
     B, K = 3, 4
     obs = {"agent": torch.randn(B, 3, 9), "neighbors": torch.randn(B, 3, K, 4),
            "neighbors_mask": torch.ones(B, 3, K)}
     cache = FrameCache()
-    cache.encode(agent.net, obs, None)
+    cache.encode(agent.net, obs)
     fresh = {"agent": obs["agent"][:, :1].expand(B, 3, 9).clone(),
              "neighbors": obs["neighbors"][:, :1].expand(B, 3, K, 4).clone(),
              "neighbors_mask": torch.ones(B, 3, K)}
     with torch.no_grad():
-        za, _ = cache.encode(agent.net, fresh, torch.tensor([True, True, True]))
+        cache.restart(torch.tensor([True, True, True]))
+        za, _ = cache.encode(agent.net, fresh)
         want, _ = agent.net.encode_frames(fresh)
     torch.testing.assert_close(za, want)

@@ -1,5 +1,6 @@
-"""The PlannerAgent: attention networks that assign every drone a candidate goal (learning.md 3) and their PPO
-update (learning.md 6), with the joint action of N drones as one sample (log-prob and entropy summed over drones).
+"""The PlannerAgent's networks: attention over fire candidates that assigns every drone a candidate goal
+(learning.md 3). The joint action of N drones is one sample (log-prob and entropy summed over drones); the PPO
+that trains them is :class:`roshan.algos.ppo.PPO` with :class:`roshan.algos.policies.PlannerPolicy`.
 
 A planner observation is a dict of float tensors with the batch first: ``drones`` (B, N, 2), ``goals`` (B, N, 2),
 ``water`` (B, N, 1), ``fires`` (B, K, 2) (index 0 = the groundstation, then fire cells, zero padding after the
@@ -8,18 +9,12 @@ An action is (B, N) long: one candidate index per drone.
 """
 
 import math
-from typing import NamedTuple
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
 from roshan.algos.networks import layer_init
-from roshan.algos.normalize import RewardScaler
-from roshan.algos.optim import make_optimizer, make_scheduler
-from roshan.algos.ppo import clip_gradients, explained_variance, minibatch_loss, normalized_advantages
-from roshan.algos.returns import gae
-from roshan.config import PlannerPPOConfig
 
 HIDDEN = 64
 HEADS = 4
@@ -285,117 +280,3 @@ class PointerPlannerNet(nn.Module):
 
 
 PLANNER_NETS = {"thesis": ThesisPlannerNet, "pointer": PointerPlannerNet}
-
-
-# ---------------------------------------------------------------------------------------------- PPO
-
-
-class PlannerRollout(NamedTuple):
-    """One update's planner data, [T, E, ...] with E = envs (one planner per env).
-
-    ``next_values`` holds V of the true next state: the next row's state, the env's ``final_obs`` where an
-    episode was truncated, or the bootstrap state after the last row (as :class:`roshan.algos.ppo.Rollout`).
-    """
-
-    obs: dict[str, torch.Tensor]  # each [T, E, ...]; fires padded to one K
-    actions: torch.Tensor  # [T, E, N] long candidate indices
-    log_probs: torch.Tensor  # [T, E] joint (sum over drones)
-    values: torch.Tensor  # [T, E]
-    next_values: torch.Tensor  # [T, E]
-    rewards: torch.Tensor  # [T, E] raw
-    terminations: torch.Tensor  # [T, E] bool
-    truncations: torch.Tensor  # [T, E] bool
-
-
-class PlannerPPO:
-    """The planner network and its PPO update (learning.md 6.2 with the joint action of all drones)."""
-
-    def __init__(self, cfg: PlannerPPOConfig, num_drones: int, device: str | torch.device = "cpu"):
-        self.cfg = cfg
-        self.device = torch.device(device)
-        self.net = PLANNER_NETS[cfg.network](num_drones).to(self.device)
-        critic = self.net.critic_parameters()
-        critic_ids = {id(p) for p in critic}
-        self.groups = {"actor": [p for p in self.net.parameters() if id(p) not in critic_ids], "critic": critic}
-        self.optimizer = make_optimizer(self.groups["actor"] + critic, cfg.lr, cfg.optim)
-        self.scheduler = make_scheduler(self.optimizer, cfg.optim)
-        self.scaler = RewardScaler(cfg.reward_eps)
-        self.updates = 0
-        self.gradient_steps = 0
-
-    @torch.no_grad()
-    def act(self, obs: dict[str, torch.Tensor], deterministic: bool = False,
-            generator: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Actions (B, N), joint log-probs (B,) and values (B,). ``generator`` must live on the net's device."""
-        actions, log_prob, _, value = self.net.forward_act(trim_candidates(obs), deterministic, generator)
-        return actions, log_prob, value
-
-    @torch.no_grad()
-    def value(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
-        return self.net.value(trim_candidates(obs))
-
-    def advantages(self, rollout: PlannerRollout) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Scaled rewards, advantages and returns, each [T, E] (the running std is updated with this horizon)."""
-        cfg = self.cfg
-        self.scaler.update(rollout.rewards)
-        rewards = self.scaler.scale(rollout.rewards)
-        terminations, truncations = rollout.terminations, rollout.truncations
-        if not cfg.bootstrap_truncated:
-            terminations, truncations = terminations | truncations, torch.zeros_like(truncations)
-        adv, ret = gae(rewards, rollout.values, rollout.next_values, terminations, truncations, cfg.gamma, cfg.lam)
-        return rewards, adv, ret
-
-    def update(self, rollout: PlannerRollout, generator: torch.Generator | None = None) -> dict[str, float]:
-        """One PPO update: ``k_epochs`` passes over the shuffled transitions in minibatches of ``batch_size``.
-        ``generator`` (CPU) drives the shuffling."""
-        cfg = self.cfg
-        rewards, adv, ret = self.advantages(rollout)
-        flat = lambda x: x.flatten(0, 1)  # noqa: E731  [T, E, ...] -> [T * E, ...]
-        obs = {k: flat(v) for k, v in rollout.obs.items()}
-        actions, old_logp, b_adv, b_ret = flat(rollout.actions), flat(rollout.log_probs), flat(adv), flat(ret)
-        n = old_logp.shape[0]
-        stats: dict[str, list[float]] = {k: [] for k in ("actor_loss", "value_loss", "entropy", "approx_kl",
-                                                          "clip_fraction")}
-        self.net.train()
-        for _ in range(cfg.k_epochs):
-            order = torch.randperm(n, generator=generator, device="cpu").to(self.device)
-            for start in range(0, n, cfg.batch_size):
-                idx = order[start:start + cfg.batch_size]
-                mb_obs = trim_candidates({k: v[idx] for k, v in obs.items()})
-                if not self._minibatch_step(mb_obs, actions[idx], old_logp[idx], b_adv[idx], b_ret[idx], stats):
-                    break  # KL early stop: abandon the rest of this epoch (later epochs still start)
-        self.updates += 1
-        out = {k: (sum(v) / len(v) if v else float("nan")) for k, v in stats.items()}
-        out.update(rewards_raw=float(rollout.rewards.mean()), rewards_scaled=float(rewards.mean()),
-                   returns=float(ret.mean()), advantages=float(adv.mean()), values=float(rollout.values.mean()),
-                   explained_variance=explained_variance(rollout.values, ret),
-                   lr=self.optimizer.param_groups[0]["lr"], epochs_steps=len(stats["actor_loss"]))
-        return out
-
-    def _minibatch_step(self, obs, actions, old_logp, adv, ret, stats) -> bool:
-        """One gradient step; returns False (and takes no step) when the KL early stop triggers."""
-        new_logp, entropy, value = self.net.evaluate(obs, actions)
-        loss = minibatch_loss(self.cfg, new_logp, old_logp, entropy, value, normalized_advantages(adv), ret, stats)
-        if loss is None:
-            return False
-        self.optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        clip_gradients(self.groups, self.cfg.max_grad_norm)
-        self.optimizer.step()
-        self.scheduler.step()
-        self.gradient_steps += 1
-        return True
-
-    def state_dict(self) -> dict:
-        return {"net": self.net.state_dict(), "optimizer": self.optimizer.state_dict(),
-                "scheduler": self.scheduler.state_dict(), "scaler": self.scaler.state_dict(),
-                "updates": self.updates, "gradient_steps": self.gradient_steps}
-
-    def load_state_dict(self, state: dict, weights_only: bool = False) -> None:
-        self.net.load_state_dict(state["net"])
-        if weights_only:
-            return
-        self.optimizer.load_state_dict(state["optimizer"])
-        self.scheduler.load_state_dict(state["scheduler"])
-        self.scaler.load_state_dict(state["scaler"])
-        self.updates, self.gradient_steps = state["updates"], state["gradient_steps"]
