@@ -42,7 +42,7 @@ from roshan.study.trial import TrialDisplay, make_objective, objective_value
 REPO = Path(__file__).resolve().parents[1]
 CONFIG = REPO / "configs" / "fly_simple.yaml"
 # A trial trains 2 PPO updates of 4 envs x 4 drones and evaluates 4 episodes of at most 100 steps.
-TINY = ["train.num_envs=4", "ppo.horizon=256", "ppo.batch_size=128", "train.max_updates=2", "train.eval_episodes=4",
+TINY = ["sim.envs=4", "ppo.horizon=256", "ppo.batch_size=128", "train.max_updates=2", "train.eval_episodes=4",
         "train.eval_envs=4", "fly.k_turn=0.1", "fly.time_limit=thesis"]
 SPACE = {"params": {"fly.rewards.goal": {"type": "float", "low": 0.2, "high": 5.0, "log": True},
                     "fly.rewards.boundary": {"type": "float", "low": -5.0, "high": -0.2},

@@ -31,7 +31,6 @@ from roshan.config.learning import (
 )
 from roshan.config.schema import (
     ConfigError,
-    apply_overrides,
     choice,
     dump_config,
     from_dict,
@@ -50,7 +49,7 @@ from roshan.config.sim import (
     SimConfig,
     WindConfig,
 )
-from roshan.config.upgrade import upgrade_config_dict
+from roshan.config.upgrade import MOVED_KEYS, upgrade_config_dict
 
 
 @dataclass(frozen=True)
@@ -90,7 +89,15 @@ def check_planner_ppo(ppo: PPOConfig) -> None:
 def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = (), cls: type = Config):
     """A YAML config (or the defaults) plus ``section.key=value`` overrides, validated (errors name the file and
     key); ``cls`` is the root :class:`Config` unless a caller loads one section on its own."""
-    return schema.load_config(path, overrides, cls=cls, upgrade=upgrade_config_dict if cls is Config else None)
+    if cls is not Config:
+        return schema.load_config(path, overrides, cls=cls)
+    return schema.load_config(path, overrides, cls=cls, upgrade=upgrade_config_dict, moved=MOVED_KEYS)
+
+
+def apply_overrides(cfg, overrides: list[str] | tuple[str, ...], where: str = "--set"):
+    """A copy of ``cfg`` with ``section.key=value`` overrides applied and validated (keys of older layouts
+    renamed as a file of that layout would be)."""
+    return schema.apply_overrides(cfg, overrides, where, moved=MOVED_KEYS if isinstance(cfg, Config) else None)
 
 
 def all_keys(cls: type = Config, prefix: str = "") -> list[str]:

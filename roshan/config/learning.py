@@ -10,15 +10,14 @@ SCHEDULERS = ("cosine", "cosine_restarts", "step", "exponential", "constant", "n
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """The training loop: batch of envs, budget, evaluation and seeds."""
+    """The training loop: budget, evaluation and repetitions (the batch of envs and the seed are ``sim.envs`` /
+    ``sim.seed``, as for every command)."""
 
     algo: str = choice("ppo", ("ppo", "td3", "iql", "planner"), doc="planner: PPO on the PlannerAgent level")
-    num_envs: int = num(64, 1, doc="environments stepped together")
     total_steps: int = num(1_000_000, 0, doc="env steps (each moves every drone once; planner: decisions); "
                                                 "0 = no limit")
     max_updates: int = num(0, 0, doc="updates; 0 = no limit")
     max_minutes: float = num(0.0, 0.0, doc="wall-clock budget of one run; 0 = no limit")
-    seed: int = num(0, 0, 2**31 - 1)
     objective_window: int = num(100, 1, doc="training episodes in the success-rate objective")
     eval_every: int = num(0, 0, doc="evaluate every K updates; 0 = only at the end")
     eval_episodes: int = num(200, 1)

@@ -42,9 +42,10 @@ def choice(default, choices: tuple, doc=""):
 
 
 def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = (), *, cls: type,
-                upgrade: Callable[[dict], dict] | None = None):
+                upgrade: Callable[[dict], dict] | None = None, moved: dict[str, str] | None = None):
     """Load ``path`` (YAML) into ``cls``, apply ``key.sub=value`` overrides and validate everything; ``upgrade``
-    brings the file's dict from an older layout first.
+    brings the file's dict from an older layout first, and ``moved`` (old dotted key -> new) renames override
+    keys of that older layout.
 
     Raises:
         ConfigError: naming the file, the key and what was expected.
@@ -66,15 +67,16 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
     if upgrade is not None:
         data = upgrade(data)
     for item in overrides:
-        _apply_override(data, item, cls)
+        _apply_override(data, item, cls, moved or {})
     return from_dict(cls, data, where=where)
 
 
-def apply_overrides(cfg, overrides: list[str] | tuple[str, ...], where: str = "--set"):
+def apply_overrides(cfg, overrides: list[str] | tuple[str, ...], where: str = "--set",
+                    moved: dict[str, str] | None = None):
     """A copy of the config ``cfg`` with ``section.key=value`` overrides applied and validated."""
     data = to_dict(cfg)
     for item in overrides:
-        _apply_override(data, item, type(cfg))
+        _apply_override(data, item, type(cfg), moved or {})
     return from_dict(type(cfg), data, where=where)
 
 
@@ -126,12 +128,13 @@ def all_keys(cls: type, prefix: str = "") -> list[str]:
     return keys
 
 
-def _apply_override(data: dict, item: str, cls: type) -> None:
+def _apply_override(data: dict, item: str, cls: type, moved: dict[str, str]) -> None:
     if "=" not in item:
         raise ConfigError(f"--set {item!r}: expected section.key=value")
     dotted, raw = item.split("=", 1)
-    parts = dotted.strip().split(".")
-    if dotted.strip() not in all_keys(cls):
+    dotted = moved.get(dotted.strip(), dotted.strip())
+    parts = dotted.split(".")
+    if dotted not in all_keys(cls):
         raise ConfigError(f"--set: unknown key {dotted.strip()!r}{suggest(dotted.strip(), all_keys(cls))}")
     node = data
     for p in parts[:-1]:

@@ -90,9 +90,9 @@ class MapConfig:
 
 @dataclass(frozen=True)
 class SimConfig:
-    """Batch size, seed and where the kernels run."""
+    """Batch size, seed and where the kernels run: for every command (simulate, train, study trials)."""
 
-    envs: int = num(1, 1, doc="environments advanced together")
-    seed: int = num(0, 0, 2**31 - 1, doc="seed of every random stream")
+    envs: int = num(1, 1, doc="environments advanced together (training: the batch the learner collects from)")
+    seed: int = num(0, 0, 2**31 - 1, doc="seed of every random stream (training: also of torch and the shuffles)")
     arch: str = choice("cpu", ("cpu", "cuda", "vulkan", "auto"))
     threads: int = num(0, 0, doc="CPU threads; 0 = all cores")

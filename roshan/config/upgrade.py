@@ -1,9 +1,15 @@
 """Config dicts written by earlier versions, brought to the current tree before validation: the config.yaml of
 an old run folder (``--resume``) and the config stored in an old checkpoint (the shipped models/).
 
-Until PPO became one class for both levels, the planner's PPO had its own section ``planner_ppo`` (the same keys
+- Until PPO became one class for both levels, the planner's PPO had its own section ``planner_ppo`` (the same keys
 as ``ppo`` without the FlyAgent-only ones, plus ``network``, other defaults) and ignored ``ppo``.
+- Until the config tree became one, training took its batch and seed from ``train.num_envs`` / ``train.seed``
+  and silently ignored ``sim.envs`` / ``sim.seed``, which ``roshan simulate`` and the envs read. Now every
+  command reads ``sim.envs`` / ``sim.seed``.
 """
+
+# Old dotted key -> its key now (also applied to ``--set`` overrides).
+MOVED_KEYS = {"train.num_envs": "sim.envs", "train.seed": "sim.seed"}
 
 # The old PlannerPPOConfig defaults that differ from PPOConfig's (thesis Table 5.8 / P3): a ``planner_ppo``
 # section that left them out meant these.
@@ -12,6 +18,27 @@ OLD_PLANNER_PPO_DEFAULTS = {"lr": 1e-4, "horizon": 4800, "batch_size": 1200, "ga
 
 
 def upgrade_config_dict(data: dict) -> dict:
+    """``data`` in the current layout: moved keys (:data:`MOVED_KEYS`) at their new place (an old training run
+    read the old key, so its value wins), then the old planner section (:func:`upgrade_planner_ppo`)."""
+    for old, new in MOVED_KEYS.items():
+        data = _move_key(data, old, new)
+    return upgrade_planner_ppo(data)
+
+
+def _move_key(data: dict, old: str, new: str) -> dict:
+    (old_section, old_key), (new_section, new_key) = old.split("."), new.split(".")
+    section = data.get(old_section)
+    if not isinstance(section, dict) or old_key not in section:
+        return data
+    data = dict(data)
+    section = dict(section)
+    value = section.pop(old_key)
+    data[old_section] = section
+    data[new_section] = {**(data.get(new_section) or {}), new_key: value}
+    return data
+
+
+def upgrade_planner_ppo(data: dict) -> dict:
     """``data`` with an old ``planner_ppo`` section moved: its ``network`` to ``planner.network``, and, for a
     planner run, the rest (with the old defaults filled in) to ``ppo``, replacing the FlyAgent ``ppo`` section
     that such a run never read. A dict without ``planner_ppo`` comes back unchanged."""

@@ -20,7 +20,7 @@ class DroneRows:
 
     def __init__(self, num_drones: int):
         self.per_env = num_drones
-        self.what = "train.num_envs x drones.num_drones"
+        self.what = "sim.envs x drones.num_drones"
 
     def obs(self, obs: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
         return flatten_drones(obs)
@@ -38,7 +38,7 @@ class DroneRows:
 
     @staticmethod
     def sampling_generator(generator: torch.Generator) -> None:
-        """FlyAgent actions have always been drawn from torch's global RNG (seeded by ``train.seed``), not the
+        """FlyAgent actions have always been drawn from torch's global RNG (seeded by ``sim.seed``), not the
         trainer's generator; keeping that keeps every earlier run reproducible bit for bit."""
         return None
 
@@ -47,7 +47,7 @@ class EnvRows:
     """Planner rows: one per env; observations, rewards and flags are the env's own."""
 
     per_env = 1
-    what = "train.num_envs"
+    what = "sim.envs"
 
     @staticmethod
     def obs(obs: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
@@ -80,7 +80,7 @@ def rollout_steps(cfg: Config, rows: DroneRows | EnvRows | None = None) -> int:
     """Env steps per rollout: ``ppo.horizon`` transitions spread over the rows of all envs (``rows`` defaults to
     the adapter of ``train.algo``)."""
     rows = level_rows(cfg) if rows is None else rows
-    per_step = cfg.train.num_envs * rows.per_env
+    per_step = cfg.sim.envs * rows.per_env
     steps = cfg.ppo.horizon // per_step
     if steps < 1 or steps * per_step != cfg.ppo.horizon:
         raise ValueError(f"ppo.horizon = {cfg.ppo.horizon} must be a positive multiple of {rows.what} = {per_step}")

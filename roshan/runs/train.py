@@ -223,8 +223,8 @@ class Trainer:
         tc = cfg.train
         if tc.algo in ("ppo", "planner"):
             rollout_steps(cfg)  # check the horizon before building anything
-        self.generator = torch.Generator().manual_seed(tc.seed)
-        torch.manual_seed(tc.seed)
+        self.generator = torch.Generator().manual_seed(cfg.sim.seed)
+        torch.manual_seed(cfg.sim.seed)
         self.agent = make_agent(cfg, torch_device())
         self.progress = Progress()
         self.episodes = EpisodeLog(window=tc.objective_window)
@@ -233,7 +233,7 @@ class Trainer:
         elif tc.init_from:
             self._init_weights(tc.init_from)
         # A resumed run starts fresh episodes from a seed that depends on where it stopped.
-        self.env = make_env(cfg, tc.num_envs, seed=tc.seed + 7919 * self.progress.updates)
+        self.env = make_env(cfg, cfg.sim.envs, seed=cfg.sim.seed + 7919 * self.progress.updates)
         self.learner = make_learner(cfg, self.env, self.agent)
         self.eval_env = None
         
@@ -335,12 +335,10 @@ class Trainer:
     def _periodic_eval(self) -> None:
         """Deterministic episodes with the current weights on a separate batch of envs (fixed seed, so the
         same fire layouts every time), logged as Evaluation/* scalars."""
-        tc = self.cfg.train
+        tc, seed = self.cfg.train, self.cfg.sim.seed + 10_000
         if self.eval_env is None:
-            self.eval_env = make_env(self.cfg, min(tc.eval_envs, tc.eval_episodes), seed=tc.seed + 10_000,
-                                     evaluation=True)
-        episodes = run_episodes(self.eval_env, policy_fn(self.agent), tc.eval_episodes, seed=tc.seed + 10_000,
-                                progress_bar=False)
+            self.eval_env = make_env(self.cfg, min(tc.eval_envs, tc.eval_episodes), seed=seed, evaluation=True)
+        episodes = run_episodes(self.eval_env, policy_fn(self.agent), tc.eval_episodes, seed=seed, progress_bar=False)
         summary = summarize(episodes)
         for tag, value in evaluation_scalars(summary).items():
             self.writer.add_scalar(tag, value, self.progress.env_steps or self.progress.updates)
@@ -401,7 +399,7 @@ def train(cfg: Config, run_dir: Path, resume: bool = False, progress_bar: bool =
     result = {"run_dir": str(run_dir), **progress.state_dict(), "train_episodes": trainer.episodes.episodes}
     if evaluate_at_end:
 
-        summary = evaluate_run(run_dir, episodes=cfg.train.eval_episodes, seed=cfg.train.seed + 20_000,
+        summary = evaluate_run(run_dir, episodes=cfg.train.eval_episodes, seed=cfg.sim.seed + 20_000,
                                num_envs=cfg.train.eval_envs, progress_bar=progress_bar)
         result["eval"] = summary
     return result
@@ -426,8 +424,8 @@ def train_auto(cfg: Config, root: str | Path = "runs", name: str | None = None, 
     parent = start_run(cfg, root, name)
     results = []
     for i in range(k):
-        seed_cfg = apply_overrides(cfg, [f"train.seed={cfg.train.seed + i}", "train.auto_train=1"])
-        run_dir = start_run(seed_cfg, parent, f"seed_{seed_cfg.train.seed}")
+        seed_cfg = apply_overrides(cfg, [f"sim.seed={cfg.sim.seed + i}", "train.auto_train=1"])
+        run_dir = start_run(seed_cfg, parent, f"seed_{seed_cfg.sim.seed}")
         results.append(train(seed_cfg, run_dir, progress_bar=progress_bar, evaluate_at_end=evaluate_at_end))
     if evaluate_at_end:
         _write_auto_summary(parent, results)

@@ -339,7 +339,7 @@ def time_training(envs: int, drones: int, fire_percentage: float, steps: int, ne
 
     name = "fly_collision" if network == "collision" else "fly_simple"
     per_rollout = 16
-    overrides = [f"train.num_envs={envs}", f"drones.num_drones={drones}",
+    overrides = [f"sim.envs={envs}", f"drones.num_drones={drones}",
                  f"ignition.fire_percentage={fire_percentage}", f"ppo.horizon={envs * drones * per_rollout}"]
     cfg = load_run_config(CONFIGS / f"{name}.yaml", overrides)
     env = make_env(cfg, envs, seed)

@@ -11,7 +11,7 @@ from roshan.algos.agent import Agent
 from roshan.algos.agents import make_agent
 from roshan.algos.frozen import load_agent, policy_fn
 from roshan.checkpoints import config_of_checkpoint, load_checkpoint, resolve_checkpoint
-from roshan.config import Config, ConfigError, TrainConfig, load_config, to_dict
+from roshan.config import Config, ConfigError, TrainConfig, all_keys, apply_overrides, load_config, to_dict
 
 ROOT = Path(__file__).resolve().parents[2]
 PLANNER = ROOT / "models" / "planner"
@@ -87,3 +87,18 @@ def test_shipped_flyagents_act_deterministically_through_the_protocol():
             mean = agent.net(obs)[0]
         torch.testing.assert_close(agent.act_deterministic(obs), agent.policy.dist_class.mode_of(mean),
                                    rtol=0, atol=0)
+
+
+def test_training_reads_the_one_batch_and_seed_keys_and_old_ones_move_there(tmp_path):
+    """train.num_envs / train.seed (read by training while sim.envs / sim.seed were silently ignored) are now
+    sim.envs / sim.seed everywhere: in old files, old checkpoints and --set."""
+    assert not {"train.num_envs", "train.seed"} & set(all_keys())
+    old = tmp_path / "old.yaml"
+    old.write_text("train:\n  num_envs: 12\n  seed: 9\n  algo: ppo\nsim:\n  envs: 3\n")
+    cfg = load_config(old)
+    assert (cfg.sim.envs, cfg.sim.seed) == (12, 9)  # the old run trained with train.*
+    assert load_config(None, ["train.num_envs=5"]).sim.envs == 5
+    assert apply_overrides(Config(), ["train.seed=4"]).sim.seed == 4
+    shipped = config_of_checkpoint(load_checkpoint(resolve_checkpoint(ROOT / "models" / "fly_simple")), "fly_simple")
+    saved = yaml.safe_load((ROOT / "models" / "fly_simple" / "config.yaml").read_text())["train"]
+    assert (shipped.sim.envs, shipped.sim.seed) == (saved["num_envs"], saved["seed"])

@@ -14,7 +14,7 @@ def collision_run(num_envs=4, horizon=4 * 4 * 24, **ppo):
     cfg = Config()
     fly = cfg.fly.__class__(policy="complex", collision=True)
     ppo_cfg = PPOConfig(horizon=horizon, batch_size=horizon // 2, use_tanh_dist=True, share_encoder=False, **ppo)
-    return cfg.__class__(fly=fly, ppo=ppo_cfg, train=cfg.train.__class__(num_envs=num_envs, seed=3))
+    return cfg.__class__(fly=fly, ppo=ppo_cfg, sim=cfg.sim.__class__(envs=num_envs, seed=3))
 
 
 def test_stack_index_by_hand():
@@ -35,7 +35,7 @@ def test_gather_stacks_picks_rows():
 def test_cached_acting_and_sequence_minibatches_match_full_encoding():
     torch.manual_seed(0)
     cfg = collision_run()
-    env = make_env(cfg, cfg.train.num_envs, seed=5)
+    env = make_env(cfg, cfg.sim.envs, seed=5)
     agent = fly_ppo(cfg.ppo, collision=True)
     collector = RolloutCollector(env, agent, DroneRows(env.num_drones), steps=24)
     rollout = collector.collect()

@@ -14,7 +14,7 @@ MODEL = ROOT / "models" / "fly_simple"
 # The small bundled field keeps episodes short (T_max 1784 low-level steps at 5 %).
 TINY = ["--set", "map.name=21x21_Field", "--set", "ignition.fire_percentage=0.05",
         "--set", f"planner.fly_model={MODEL}", "--set", f"planner.explorer_model={MODEL}",
-        "--set", "planner.num_explorers=2", "--set", "train.num_envs=4", "--set", "ppo.horizon=32",
+        "--set", "planner.num_explorers=2", "--set", "sim.envs=4", "--set", "ppo.horizon=32",
         "--set", "ppo.batch_size=16", "--set", "train.max_minutes=0", "--set", "train.eval_every=0"]
 
 

@@ -16,7 +16,7 @@ from roshan.checkpoints import checkpoint_path, load_checkpoint
 from roshan.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
-TINY = ["--set", "train.num_envs=4", "--set", "ppo.horizon=128", "--set", "ppo.batch_size=64",
+TINY = ["--set", "sim.envs=4", "--set", "ppo.horizon=128", "--set", "ppo.batch_size=64",
         "--set", "train.total_steps=0", "--set", "train.max_minutes=0"]
 
 
@@ -139,7 +139,7 @@ def test_eval_is_repeatable_under_a_seed(tmp_path):
 
 def test_td3_and_iql_run_end_to_end(tmp_path):
     res = cli("train", ROOT / "configs/td3_simple.yaml", "--root", tmp_path, "--name", "td3", "--quiet",
-              "--set", "train.num_envs=4", "--set", "td3.min_memory_size=256", "--set", "train.max_updates=2",
+              "--set", "sim.envs=4", "--set", "td3.min_memory_size=256", "--set", "train.max_updates=2",
               "--set", "train.total_steps=0", "--set", "train.eval_episodes=4", "--set", "train.eval_envs=4")
     assert res.exit_code == 0, res.output
     assert counters(tmp_path / "td3")["env_steps"] == 2 * 64 * 4
@@ -148,7 +148,7 @@ def test_td3_and_iql_run_end_to_end(tmp_path):
     assert res.exit_code == 0 and buf.is_file(), res.output
     res = cli("train", ROOT / "configs/iql_offline.yaml", "--root", tmp_path, "--name", "iql", "--quiet",
               "--set", f"train.buffer_path={buf}", "--set", "iql.offline_updates=2", "--set", "train.max_updates=2",
-              "--set", "train.eval_episodes=4", "--set", "train.eval_envs=4", "--set", "train.num_envs=4",
+              "--set", "train.eval_episodes=4", "--set", "train.eval_envs=4", "--set", "sim.envs=4",
               "--set", "fly.collision=false", "--set", "fly.policy=simple")
     assert res.exit_code == 0, res.output
     state = load_checkpoint(checkpoint_path(tmp_path / "iql"))
@@ -160,7 +160,7 @@ def test_auto_train_seeds_and_periodic_evaluation(tmp_path):
     from roshan.runs.report.scalars import read_tensorboard_scalars
 
     res = cli("train", ROOT / "configs/fly_simple.yaml", "--root", tmp_path, "--name", "auto", "--quiet", *TINY,
-              "--set", "train.max_updates=2", "--set", "train.auto_train=2", "--set", "train.seed=7",
+              "--set", "train.max_updates=2", "--set", "train.auto_train=2", "--set", "sim.seed=7",
               "--set", "train.eval_every=1", "--set", "train.eval_episodes=2", "--set", "train.eval_envs=2")
     assert res.exit_code == 0, res.output
     parent = tmp_path / "auto"
@@ -169,6 +169,6 @@ def test_auto_train_seeds_and_periodic_evaluation(tmp_path):
     for seed in (7, 8):
         run = parent / f"seed_{seed}"
         assert (run / "eval" / "summary.json").is_file()
-        assert load_checkpoint(checkpoint_path(run))["config"]["train"]["seed"] == seed
+        assert load_checkpoint(checkpoint_path(run))["config"]["sim"]["seed"] == seed
         scalars = read_tensorboard_scalars(run / "tb")
         assert len(scalars["Evaluation/Success_rate"]) == 2  # after each of the 2 updates
