@@ -13,13 +13,12 @@ Checkpoints are written to a temporary file in the same folder and renamed over 
 at any moment leaves the previous checkpoint intact.
 """
 
-import os
-import tempfile
 from pathlib import Path
 
 import torch
 
 from roshan.config import Config, ConfigError, from_dict, to_dict, upgrade_config_dict
+from roshan.io import atomic_file
 
 CHECKPOINTS = ("latest", "best_reward", "best_objective", "best_eval")
 # What "best" means for evaluation: the periodic deterministic evaluation when the run had one (it measures the
@@ -64,19 +63,9 @@ def resolve_checkpoint(target: str | Path, which: str = "best") -> Path:
 
 
 def save_checkpoint(state: dict, path: Path) -> None:
-    """``torch.save`` to a temporary file next to ``path``, fsync, then rename over ``path`` (atomic)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            torch.save(state, f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    """``torch.save`` to ``path`` atomically: a run killed at any moment leaves the previous checkpoint whole."""
+    with atomic_file(path) as f:
+        torch.save(state, f)
 
 
 def load_checkpoint(path: str | Path) -> dict:

@@ -3,30 +3,41 @@
 import contextlib
 import os
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 from PIL import Image
 
 
-def write_atomic(path: str | os.PathLike, data: bytes) -> Path:
-    """Writes a temp file in the target folder, then renames it over ``path``: readers never see a partial file."""
+@contextlib.contextmanager
+def atomic_file(path: str | os.PathLike, mode: int | None = None) -> Iterator[BinaryIO]:
+    """A binary file to write ``path`` through: a temp file in the target folder, fsynced and renamed over
+    ``path`` when the block ends, removed if it raises, so readers (and a killed run) never see half a file.
+    ``mode`` sets its permissions (mkstemp creates 0600)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as f:
-            f.write(data)
+            yield f
             f.flush()
             os.fsync(f.fileno())
-        os.chmod(tmp, 0o644)  # mkstemp creates 0600; results should be as readable as any other output
+        if mode is not None:
+            os.chmod(tmp, mode)
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
-    return path
+
+
+def write_atomic(path: str | os.PathLike, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (:func:`atomic_file`), readable like any other output."""
+    with atomic_file(path, mode=0o644) as f:
+        f.write(data)
+    return Path(path)
 
 
 def write_gif(frames: Sequence[Path | str | np.ndarray], out: Path | str, fps: int = 10) -> Path:

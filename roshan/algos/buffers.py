@@ -4,13 +4,13 @@ Rows are single transitions; envs x drones are flattened into the row axis, so o
 of every env and uniform sampling over it is uniform over all drones' transitions (newest-code sampling).
 """
 
-import os
-import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import NamedTuple
 
 import torch
+
+from roshan.io import atomic_file
 
 FORMAT = "roshan-replay-v1"
 
@@ -139,16 +139,8 @@ class ReplayBuffer:
                  "next_obs": {k: self._chronological(v) for k, v in self.next_obs.items()},
                  "actions": self._chronological(self.actions), "rewards": self._chronological(self.rewards),
                  "not_done": self._chronological(self.not_done)}
-        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                torch.save(state, f)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        with atomic_file(path) as f:
+            torch.save(state, f)
 
     @classmethod
     def load(cls, path: str | Path, device: str | torch.device = "cpu", capacity: int | None = None) -> "ReplayBuffer":
