@@ -9,6 +9,8 @@ budget. A killed run resumes from ``latest`` with its counters, optimisers, rewa
 import collections
 import json
 import math
+import shlex
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -236,8 +238,23 @@ class Trainer:
         self.env = make_env(cfg, cfg.sim.envs, seed=cfg.sim.seed + 7919 * self.progress.updates)
         self.learner = make_learner(cfg, self.env, self.agent)
         self.eval_env = None
-        
-        self.writer = SummaryWriter(str(self.run_dir / "tb"), purge_step=self.progress.env_steps or None)
+        self.writer = self._open_writer(resumed=resume_state is not None)
+
+    @property
+    def log_step(self) -> int:
+        """The TensorBoard step of the last update: env steps, or updates where none were taken (IQL offline)."""
+        return self.progress.env_steps or self.progress.updates
+
+    def _open_writer(self, resumed: bool) -> SummaryWriter:
+        """The run's TensorBoard writer. A resumed run drops only what a killed process logged after its last
+        checkpoint (steps above that checkpoint's, which the resumed run logs again), never the checkpoint's own
+        step, and records the resume with its command line."""
+        purge = self.log_step + 1 if self.progress.updates else None
+        writer = SummaryWriter(str(self.run_dir / "tb"), purge_step=purge)
+        if resumed:
+            writer.add_text("Run/resumed", f"resumed at update {self.progress.updates} ({self.progress.env_steps:,} "
+                                           f"env steps): `{shlex.join(sys.argv)}`", self.log_step)
+        return writer
 
     def _init_weights(self, target: str) -> None:
         """Fine-tuning: the networks (not optimisers, counters or the reward scaler) of another run's checkpoint."""
@@ -309,7 +326,7 @@ class Trainer:
         return self.progress
 
     def _log(self, m: dict) -> None:
-        w, step = self.writer, self.progress.env_steps or self.progress.updates
+        w, step = self.writer, self.log_step
         tags = {"Rewards/Rewards_Raw": "rewards_raw", "Rewards/Rewards_norm": "rewards_scaled",
                 "Rewards/Returns": "returns", "Rewards/Advantages": "advantages", "Rewards/Values": "values",
                 "Training/Approx_KL": "approx_kl", "Training/Clip_Fraction": "clip_fraction",
@@ -341,7 +358,7 @@ class Trainer:
         episodes = run_episodes(self.eval_env, policy_fn(self.agent), tc.eval_episodes, seed=seed, progress_bar=False)
         summary = summarize(episodes)
         for tag, value in evaluation_scalars(summary).items():
-            self.writer.add_scalar(tag, value, self.progress.env_steps or self.progress.updates)
+            self.writer.add_scalar(tag, value, self.log_step)
         # The deterministic policy is what gets shipped, and in the collision setting it can be much better or worse
         # than the stochastic training objective says: keep the weights that evaluated best.
         if summary["success_rate"] >= self.progress.best_eval:

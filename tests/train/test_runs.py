@@ -172,3 +172,35 @@ def test_auto_train_seeds_and_periodic_evaluation(tmp_path):
         assert load_checkpoint(checkpoint_path(run))["config"]["sim"]["seed"] == seed
         scalars = read_tensorboard_scalars(run / "tb")
         assert len(scalars["Evaluation/Success_rate"]) == 2  # after each of the 2 updates
+
+
+def test_resume_keeps_the_tensorboard_history_up_to_its_checkpoint(tmp_path):
+    """A resume drops only what a killed process logged after its last checkpoint, never the checkpoint's own
+    step (it used to purge that one too), and records itself as a text entry."""
+    from torch.utils.tensorboard import SummaryWriter
+
+    from roshan.runs.report.scalars import read_tensorboard_scalars
+
+    def run_three_then_resume(name: str, killed_after: bool) -> dict:
+        res = cli("train", ROOT / "configs/fly_simple.yaml", "--root", tmp_path, "--name", name, "--no-eval",
+                  "--quiet", *TINY, "--set", "train.max_updates=3")
+        assert res.exit_code == 0, res.output
+        run = tmp_path / name
+        if killed_after:  # what a process killed between its last checkpoint and the next one had logged
+            with SummaryWriter(str(run / "tb")) as w:
+                w.add_scalar("Rewards/Rewards_Raw", 999.0, counters(run)["env_steps"] + 32)
+        res = cli("train", "--resume", run, "--no-eval", "--quiet", "--set", "train.max_updates=5")
+        assert res.exit_code == 0, res.output
+        return {k: v for k, v in read_tensorboard_scalars(run / "tb").items() if not k.startswith("Perf/")}
+
+    clean = run_three_then_resume("clean", killed_after=False)
+    killed = run_three_then_resume("killed", killed_after=True)
+    steps = [s for s, _ in clean["Rewards/Rewards_Raw"]]
+    assert steps == [32, 64, 96, 128, 160]  # the checkpoint's step (96) survives the resume
+    assert killed == clean  # the killed process's point is gone; every other value step for step (not timings)
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    acc = EventAccumulator(str(tmp_path / "clean" / "tb"))
+    acc.Reload()
+    texts = acc.Tensors("Run/resumed/text_summary")
+    assert len(texts) == 1 and b"resumed at update 3" in texts[0].tensor_proto.string_val[0]
