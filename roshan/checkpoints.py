@@ -13,6 +13,13 @@ Checkpoints are written to a temporary file in the same folder and renamed over 
 at any moment leaves the previous checkpoint intact.
 """
 
+import contextlib
+import fcntl
+import os
+import shlex
+import socket
+import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import torch
@@ -57,6 +64,32 @@ def resolve_checkpoint(target: str | Path, which: str = "best") -> Path:
         if p.is_file():
             return p
     raise FileNotFoundError(f"{target}: no checkpoints/{which}.pt or checkpoints/latest.pt in this run folder")
+
+
+class RunBusy(RuntimeError):
+    """Another process is training in this run folder."""
+
+
+@contextlib.contextmanager
+def run_lock(run_dir: str | Path) -> Iterator[None]:
+    """Hold ``run_dir/.lock`` while training in it: a second process (a second ``--resume``) is refused with
+    who holds it instead of both writing checkpoints and event files. The lock dies with its process (flock),
+    so a killed run never leaves the folder locked."""
+    path = Path(run_dir) / ".lock"
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.pread(fd, 4096, 0).decode(errors="replace").strip() or "another process"
+        os.close(fd)
+        raise RunBusy(f"{run_dir}: a process is training in this run folder ({holder}); wait for it or stop it "
+                      "first") from None
+    try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"pid {os.getpid()} on {socket.gethostname()}: {shlex.join(sys.argv)}\n".encode(), 0)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
 
 
 # ------------------------------------------------------------------------------------------------ checkpoints

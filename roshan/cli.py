@@ -146,7 +146,8 @@ def maps_crop(source, bounds, crs, output):
 @click.option("--name", default=None, help="Run folder name under --root (default: <algo>_<date-time>).")
 @click.option("--root", default="runs", show_default=True, type=click.Path(file_okay=False))
 @click.option("--resume", "resume_dir", default=None, type=click.Path(file_okay=False),
-              help="Continue this run folder from its latest checkpoint (its config.yaml, plus --set).")
+              help="Continue this run folder from its latest checkpoint (the checkpoint's config, plus --set, "
+                   "which later resumes keep).")
 @click.option("--no-eval", is_flag=True, help="Skip the evaluation after training.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @SETS
@@ -159,6 +160,7 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
     and eval/ (episodes.csv, summary.json, plots). With train.auto_train = k, k runs with seeds seed..seed+k-1
     go to runs/<name>/seed_<s>/.
     """
+    from roshan.checkpoints import RunBusy
     from roshan.config import load_run_config
     from roshan.runs import train as tr
 
@@ -169,12 +171,12 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
             if config_path is not None:
                 raise click.UsageError("give either CONFIG or --resume RUN (a resumed run keeps its config)")
             run_dir = Path(resume_dir)
-            cfg = load_run_config(run_dir / "config.yaml", overrides)
+            cfg = tr.resume_config(run_dir, overrides)
             results = [tr.train(cfg, run_dir, resume=True, progress_bar=not quiet, evaluate_at_end=not no_eval)]
         else:
             cfg = load_run_config(config_path, overrides)
             results = tr.train_auto(cfg, root, name, progress_bar=not quiet, evaluate_at_end=not no_eval)
-    except (ConfigError, MapError, ValueError, FileNotFoundError) as exc:
+    except (ConfigError, MapError, ValueError, FileNotFoundError, RunBusy) as exc:
         _fail(exc)
     for res in results:
         click.echo(tr.result_lines(res))

@@ -18,6 +18,8 @@ from typing import Any
 
 import yaml
 
+from roshan.io import write_atomic
+
 
 class ConfigError(ValueError):
     """A config file, key or value is wrong; the message says where and what was expected."""
@@ -107,8 +109,9 @@ def to_dict(cfg) -> dict:
 
 
 def dump_config(cfg, path: str | Path) -> None:
-    """Write the resolved config as YAML."""
-    Path(path).write_text(yaml.safe_dump(to_dict(cfg), sort_keys=False))
+    """Write the resolved config as YAML, atomically: a full disk or a kill leaves the old file whole, never an
+    empty one."""
+    write_atomic(path, yaml.safe_dump(to_dict(cfg), sort_keys=False).encode())
 
 
 def replace(cfg, **changes):

@@ -33,9 +33,10 @@ from roshan.checkpoints import (
     load_checkpoint,
     new_run_dir,
     resolve_checkpoint,
+    run_lock,
     save_checkpoint,
 )
-from roshan.config import Config, apply_overrides, dump_config
+from roshan.config import Config, apply_overrides, dump_config, load_config
 from roshan.env.fly import FlyVectorEnv
 from roshan.episode import EPISODE_FIELDS, FAILURES, REASONS
 from roshan.runs.collect import PPOLearner, rollout_steps
@@ -390,6 +391,25 @@ def start_run(cfg: Config, root: str | Path = "runs", name: str | None = None) -
     return run_dir
 
 
+def resume_config(run_dir: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Config:
+    """The config a resumed run continues with: its ``latest`` checkpoint's (the truth: ``config.yaml`` may be
+    damaged or stale), plus ``overrides``; ``config.yaml`` only for a run killed before its first checkpoint.
+    The result is written back to ``config.yaml`` so that a later resume keeps these overrides."""
+    run_dir = Path(run_dir)
+    latest = checkpoint_path(run_dir, "latest")
+    if latest.is_file():
+        cfg = apply_overrides(config_of_checkpoint(load_checkpoint(latest), str(latest)), overrides)
+    else:
+        path = run_dir / "config.yaml"
+        if not path.is_file() or not path.read_text().strip():
+            raise FileNotFoundError(f"{run_dir}: nothing to resume from (no checkpoints/latest.pt, and config.yaml "
+                                    "is missing or empty); start the run again from its config")
+        cfg = load_config(path, overrides)
+    if overrides:
+        dump_config(cfg, run_dir / "config.yaml")
+    return cfg
+
+
 def resume_state(run_dir: Path, cfg: Config) -> dict | None:
     """The ``latest`` checkpoint of ``run_dir`` after checking it fits ``cfg`` (None if there is none yet)."""
     path = checkpoint_path(run_dir, "latest")
@@ -410,12 +430,12 @@ def train(cfg: Config, run_dir: Path, resume: bool = False, progress_bar: bool =
     ensure_taichi_for(cfg)
     if cfg.train.torch_threads:
         torch.set_num_threads(cfg.train.torch_threads)
-    state = resume_state(run_dir, cfg) if resume else None
-    trainer = Trainer(cfg, run_dir, state, progress_bar, on_update)
-    progress = trainer.run()
+    with run_lock(run_dir):
+        state = resume_state(run_dir, cfg) if resume else None
+        trainer = Trainer(cfg, run_dir, state, progress_bar, on_update)
+        progress = trainer.run()
     result = {"run_dir": str(run_dir), **progress.state_dict(), "train_episodes": trainer.episodes.episodes}
     if evaluate_at_end:
-
         summary = evaluate_run(run_dir, episodes=cfg.train.eval_episodes, seed=cfg.sim.seed + 20_000,
                                num_envs=cfg.train.eval_envs, progress_bar=progress_bar)
         result["eval"] = summary

@@ -204,3 +204,36 @@ def test_resume_keeps_the_tensorboard_history_up_to_its_checkpoint(tmp_path):
     acc.Reload()
     texts = acc.Tensors("Run/resumed/text_summary")
     assert len(texts) == 1 and b"resumed at update 3" in texts[0].tensor_proto.string_val[0]
+
+
+def test_resume_trusts_the_checkpoint_and_keeps_earlier_resume_overrides(tmp_path):
+    """An emptied config.yaml (what a full disk at start leaves) does not reset the run to defaults, and a
+    plain resume keeps what an earlier resume set with --set."""
+    res = cli("train", ROOT / "configs/fly_simple.yaml", "--root", tmp_path, "--name", "r", "--no-eval", "--quiet",
+              *TINY, "--set", "train.max_updates=1", "--set", "ppo.lr=0.002")
+    assert res.exit_code == 0, res.output
+    run = tmp_path / "r"
+    (run / "config.yaml").write_text("")
+    res = cli("train", "--resume", run, "--no-eval", "--quiet", "--set", "train.max_updates=2",
+              "--set", "ppo.entropy_coeff=0.02")
+    assert res.exit_code == 0, res.output
+    saved = load_checkpoint(checkpoint_path(run))["config"]
+    assert saved["ppo"]["lr"] == 0.002 and saved["sim"]["envs"] == 4  # the checkpoint's, not the defaults
+    res = cli("train", "--resume", run, "--no-eval", "--quiet", "--set", "train.max_updates=3")
+    assert res.exit_code == 0, res.output
+    saved = load_checkpoint(checkpoint_path(run))["config"]
+    assert counters(run)["updates"] == 3 and saved["ppo"]["entropy_coeff"] == 0.02  # the first resume's --set
+    assert "entropy_coeff: 0.02" in (run / "config.yaml").read_text()
+
+
+def test_a_run_folder_is_locked_while_a_process_trains_in_it(tmp_path):
+    from roshan.checkpoints import run_lock
+
+    res = cli("train", ROOT / "configs/fly_simple.yaml", "--root", tmp_path, "--name", "r", "--no-eval", "--quiet",
+              *TINY, "--set", "train.max_updates=1")
+    assert res.exit_code == 0, res.output
+    with run_lock(tmp_path / "r"):
+        res = CliRunner().invoke(main, ["train", "--resume", str(tmp_path / "r"), "--no-eval", "--quiet",
+                                        "--set", "train.max_updates=2"])
+    assert res.exit_code == 1 and f"pid {os.getpid()}" in res.output and "Traceback" not in res.output
+    assert counters(tmp_path / "r")["updates"] == 1
