@@ -1,10 +1,23 @@
 """Config loading: defaults, YAML files, --set overrides and the errors for bad input."""
 
+import dataclasses
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from roshan.config import Config, ConfigError, all_keys, load_config
+from roshan.config import (
+    Config,
+    ConfigError,
+    FlyConfig,
+    IgnitionConfig,
+    MapConfig,
+    OptimConfig,
+    PPOConfig,
+    SimConfig,
+    all_keys,
+    load_config,
+)
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 
@@ -78,3 +91,43 @@ def test_bad_yaml_files_name_the_file(tmp_path):
 def test_all_keys_lists_dotted_leaves():
     keys = all_keys()
     assert "fire.convection.tau_mem" in keys and "ignition.pattern" in keys and "fire" not in keys
+
+
+@pytest.mark.parametrize("build, words", [
+    (lambda: FlyConfig(frames=0), ["FlyConfig: fly.frames = 0 is out of range", "[1, 8]"]),
+    (lambda: FlyConfig(policy="bogus"), ["FlyConfig: fly.policy = 'bogus'", "simple, complex"]),
+    (lambda: IgnitionConfig(fire_percentage=2.0), ["IgnitionConfig: ignition.fire_percentage = 2.0", "[0.0, 1.0]"]),
+    (lambda: SimConfig(envs=2.5), ["SimConfig: sim.envs must be int"]),
+    (lambda: OptimConfig(eps=0.0), ["OptimConfig: eps = 0.0 is out of range"]),  # at three places: no prefix
+    (lambda: dataclasses.replace(FlyConfig(), frames=100), ["fly.frames = 100 is out of range"]),
+    (lambda: Config(fly=IgnitionConfig()), ["Config: fly must be a FlyConfig, got IgnitionConfig("]),
+    (lambda: Config(fly={"frames": 2}), ["Config: fly must be a FlyConfig"]),
+])
+def test_configs_built_in_python_are_validated_like_yaml(build, words):
+    with pytest.raises(ConfigError) as err:
+        build()
+    for w in words:
+        assert w in str(err.value)
+
+
+def test_a_config_built_in_python_equals_the_yaml_one(tmp_path):
+    path = tmp_path / "small.yaml"
+    path.write_text("map:\n  name: uniform\n  uniform_rows: 12\nfly:\n  frames: 2\n  k_turn: 2\n"
+                    "ppo:\n  lr: 3e-5\n")
+    built = Config(map=MapConfig(name="uniform", uniform_rows=12), fly=FlyConfig(frames=2, k_turn=2),
+                   ppo=PPOConfig(lr="3e-5"))
+    assert built == load_config(path)
+    assert type(built.fly.k_turn) is float and type(SimConfig(envs=np.int64(3)).envs) is int  # coerced as YAML is
+
+
+@pytest.mark.parametrize("text", ["", "# only a comment\n"])
+def test_an_empty_config_file_is_an_error(tmp_path, text):
+    path = tmp_path / "empty.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=r"empty\.yaml: the config file is empty; expected sections such as map"):
+        load_config(path)
+
+
+def test_other_libraries_key_names_suggest_ours():
+    with pytest.raises(ConfigError, match="did you mean 'ppo.lr'"):
+        load_config(None, ["ppo.learning_rate=1e-4"])

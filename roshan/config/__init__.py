@@ -53,7 +53,7 @@ from roshan.config.upgrade import MOVED_KEYS, upgrade_config_dict
 
 
 @dataclass(frozen=True)
-class Config:
+class Config(schema.Section):
     """Everything: the simulator, the agents' tasks, the training loop and each algorithm's hyperparameters."""
 
     map: MapConfig = field(default_factory=MapConfig)
@@ -71,8 +71,12 @@ class Config:
     planner: PlannerConfig = field(default_factory=PlannerConfig)
 
     def __post_init__(self):
+        super().__post_init__()  # each section is a section of its class (they validated themselves)
         if self.train.algo == "planner":
             check_planner_ppo(self.ppo)
+
+
+schema.register_tree(Config)  # errors of a section built in Python name its dotted key ("fly.frames")
 
 
 def check_planner_ppo(ppo: PPOConfig) -> None:

@@ -6,7 +6,7 @@ Reward presets are data (thesis Tables 5.3-5.5, 5.7, 5.9); the ``ti.func``s that
 
 from dataclasses import dataclass, field
 
-from roshan.config.schema import choice, num
+from roshan.config.schema import Section, choice, num
 
 # Thesis Table 5.3 (defaults), Table 5.4 (best single Optuna trial), Table 5.5 (mean of the top-10 trials).
 PRESETS: dict[str, dict[str, float]] = {
@@ -21,7 +21,7 @@ PRESETS: dict[str, dict[str, float]] = {
 
 
 @dataclass(frozen=True)
-class RewardConfig:
+class RewardConfig(Section):
     """A preset of coefficients; any field set here overrides the preset's value."""
 
     preset: str = choice("thesis", tuple(PRESETS))
@@ -35,7 +35,7 @@ class RewardConfig:
 
 
 @dataclass(frozen=True)
-class FlyConfig:
+class FlyConfig(Section):
     """The FlyAgent task (agents.md 5-9)."""
 
     policy: str = choice("simple", ("simple", "complex"))  # simple: reach the goal; complex: put every fire out
@@ -62,7 +62,7 @@ PLANNER_NEWEST_TERMS = {"distance": 0.1, "spread": 0.05, "refill": 0.5, "empty":
 
 
 @dataclass(frozen=True)
-class PlannerRewardConfig:
+class PlannerRewardConfig(Section):
     """Planner reward: a preset of the thesis terms (any field set here overrides it); ``version = newest`` adds
     DistanceProgress, SpreadPrevention (and with the water limit WaterRefill, EmptyTank) and makes the
     groundstation and same-goal terms per drone as in the newest code."""
@@ -86,7 +86,7 @@ CONTROLLERS = ("planner", "greedy")  # who picks the planner drones' goals
 
 
 @dataclass(frozen=True)
-class PlannerConfig:
+class PlannerConfig(Section):
     """The planner level (agents.md 11, 13): timing, explorers, low-level policies, candidates, rewards."""
 
     interval: int = num(5, 1, 100, doc="hierarchy_timesteps: low-level steps per planner decision")

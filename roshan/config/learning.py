@@ -2,14 +2,14 @@
 
 from dataclasses import dataclass, field
 
-from roshan.config.schema import choice, num
+from roshan.config.schema import Section, choice, num
 
 OPTIMIZER_NAMES = ("adam", "adamw", "sgd", "rmsprop", "radam")
 SCHEDULERS = ("cosine", "cosine_restarts", "step", "exponential", "constant", "none")
 
 
 @dataclass(frozen=True)
-class TrainConfig:
+class TrainConfig(Section):
     """The training loop: budget, evaluation and repetitions (the batch of envs and the seed are ``sim.envs`` /
     ``sim.seed``, as for every command)."""
 
@@ -29,7 +29,7 @@ class TrainConfig:
 
 
 @dataclass(frozen=True)
-class OptimConfig:
+class OptimConfig(Section):
     """Optimiser and schedule. Defaults are the thesis-era ones: Adam(0.9, 0.999, eps 1e-5) with a cosine
     schedule of T_max 1e6 steps, stepped per gradient step (effectively constant over a run)."""
 
@@ -51,7 +51,7 @@ FLY_ONLY_PPO_KEYS = ("log_std", "decay_rate", "share_encoder", "use_tanh_dist", 
 
 
 @dataclass(frozen=True)
-class PPOConfig:
+class PPOConfig(Section):
     """PPO hyperparameters of either level (``train.algo`` ppo: the FlyAgent; planner: the PlannerAgent). Defaults
     are thesis Table 5.2 (E1, FlyAgent); the planner's Table 5.8 values are set in configs/planner*.yaml. The keys
     in :data:`FLY_ONLY_PPO_KEYS` shape the FlyAgent policy and are refused for the planner."""
@@ -84,7 +84,7 @@ class PPOConfig:
 
 
 @dataclass(frozen=True)
-class TD3Config:
+class TD3Config(Section):
     """TD3 hyperparameters; defaults are thesis Table 5.2 (learning.md 14.1)."""
 
     lr: float = num(1e-4, 0.0, lo_open=True, doc="learning rate of actor and critic")
@@ -104,7 +104,7 @@ class TD3Config:
 
 
 @dataclass(frozen=True)
-class IQLConfig:
+class IQLConfig(Section):
     """IQL hyperparameters; defaults are thesis Table 5.2 and the newest config (learning.md 14.1, 14.5)."""
 
     lr: float = num(1.575e-4, 0.0, lo_open=True, doc="learning rate of actor, critic and value")
@@ -125,7 +125,7 @@ class IQLConfig:
 
 
 @dataclass(frozen=True)
-class RNDConfig:
+class RNDConfig(Section):
     """RND switches; off in every reference experiment (learning.md 15)."""
 
     enabled: bool = False  # add the scaled intrinsic reward to the scaled extrinsic one

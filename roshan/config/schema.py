@@ -2,13 +2,17 @@
 overrides and one validator.
 
 Every section is a frozen dataclass whose defaults are the spec's (``shared/spec/``). Each field declares its
-allowed range in ``metadata`` so one validator checks them all and errors name the key.
+allowed range in ``metadata`` so one validator checks them all and errors name the key. Sections derive from
+:class:`Section`, which runs that validator on construction: a config built in Python (``FlyConfig(frames=0)``)
+fails as the same key in a YAML file or ``--set`` would, instead of crashing a kernel later.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
+import numbers
 import types
 import typing
 from collections.abc import Callable
@@ -40,6 +44,59 @@ def choice(default, choices: tuple, doc=""):
     return field(default=default, metadata=_range(choices=choices, doc=doc))
 
 
+class Section:
+    """Base of every config section: validates each field on construction (``Cls(...)``, ``dataclasses.replace``,
+    :func:`from_dict`), coercing as YAML loading does (an int for a float field becomes a float).
+
+    Errors read ``Cls: dotted.key = value ...``; the dotted key is known for sections that sit at one place in
+    the tree registered with :func:`register_tree` (else the field name alone).
+    """
+
+    def __post_init__(self):
+        cls = type(self)
+        prefix = _PREFIXES.get(cls, "")
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            checked = check_field(f, _hints(cls)[f.name], value, cls.__name__, prefix + f.name)
+            if checked is not value:  # frozen: the coerced value (e.g. 3 -> 3.0) replaces the given one
+                object.__setattr__(self, f.name, checked)
+
+
+# Section class -> its dotted prefix in the registered tree ("fly."), for sections found at exactly one place.
+_PREFIXES: dict[type, str] = {}
+
+
+def register_tree(root: type) -> None:
+    """Record where each section class of ``root`` sits so construction errors can name the dotted key; a
+    class found at several places (``OptimConfig``) keeps the plain field name."""
+    places: dict[type, list[str]] = {}
+
+    def walk(cls: type, prefix: str) -> None:
+        for f in dataclasses.fields(cls):
+            hint = _hints(cls)[f.name]
+            if dataclasses.is_dataclass(hint):
+                places.setdefault(hint, []).append(f"{prefix}{f.name}.")
+                walk(hint, f"{prefix}{f.name}.")
+
+    walk(root, "")
+    _PREFIXES.update({cls: where[0] for cls, where in places.items() if len(where) == 1})
+
+
+@functools.cache
+def _hints(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def check_field(f: dataclasses.Field, hint, value, where: str, key: str):
+    """The one check of a field's value (type, coercion, range, choices): ``value`` as stored, or ConfigError
+    naming ``where`` and ``key``. A nested section must already be an instance of its class."""
+    if dataclasses.is_dataclass(hint):
+        if not isinstance(value, hint):
+            raise ConfigError(f"{where}: {key} must be a {hint.__name__}, got {value!r}")
+        return value
+    return _check_value(_coerce(value, hint, where, key), f, where, key)
+
+
 # ---------------------------------------------------------------------------------------------- loading
 
 
@@ -61,9 +118,13 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
         except OSError as exc:
             raise ConfigError(f"{path}: cannot read config file ({exc.strerror})") from exc
         try:
-            data = yaml.safe_load(text) or {}
+            data = yaml.safe_load(text)
         except yaml.YAMLError as exc:
             raise ConfigError(f"{path}: not valid YAML ({exc})") from exc
+        if data is None:  # an empty (or all-comment) file is a mistake, not a request for every default
+            sections = ", ".join(f.name for f in dataclasses.fields(cls)[:4])
+            raise ConfigError(f"{path}: the config file is empty; expected sections such as {sections} (to use "
+                              "the defaults, give no config file)")
         if not isinstance(data, dict):
             raise ConfigError(f"{path}: expected a mapping of sections at the top level, got {type(data).__name__}")
     if upgrade is not None:
@@ -87,7 +148,7 @@ def from_dict(cls: type, data: dict, where: str = "config", prefix: str = ""):
     if not isinstance(data, dict):
         raise ConfigError(f"{where}: {prefix or 'top level'} must be a mapping, got {data!r}")
     fields = {f.name: f for f in dataclasses.fields(cls)}
-    hints = typing.get_type_hints(cls)
+    hints = _hints(cls)
     for key in data:
         if key not in fields:
             valid = [prefix + name for name in fields]
@@ -98,8 +159,8 @@ def from_dict(cls: type, data: dict, where: str = "config", prefix: str = ""):
         full = f"{prefix}{name}"
         if dataclasses.is_dataclass(hint):
             kwargs[name] = from_dict(hint, value if value is not None else {}, where, full + ".")
-        else:
-            kwargs[name] = _check_value(_coerce(value, hint, where, full), fields[name], where, full)
+        else:  # checked here to name the file; the section's own check then finds nothing more
+            kwargs[name] = check_field(fields[name], hint, value, where, full)
     return cls(**kwargs)
 
 
@@ -150,7 +211,20 @@ def _apply_override(data: dict, item: str, cls: type, moved: dict[str, str]) -> 
         raise ConfigError(f"--set {item!r}: cannot parse value ({exc})") from exc
 
 
+# Names other RL libraries (Stable-Baselines3, CleanRL) use for our keys: string similarity alone would answer
+# "learning_rate" with "decay_rate" rather than "lr".
+ALIASES = {"learning_rate": "lr", "n_epochs": "k_epochs", "epochs": "k_epochs", "update_epochs": "k_epochs",
+           "gae_lambda": "lam", "clip_range": "eps_clip", "clip_coef": "eps_clip", "ent_coef": "entropy_coeff",
+           "vf_coef": "value_loss_coef", "n_steps": "horizon", "num_steps": "horizon", "num_envs": "envs",
+           "n_envs": "envs", "discount": "gamma", "target_kl": "kl_target"}
+
+
 def suggest(key: str, valid) -> str:
+    """"; did you mean 'x'?" for the valid key closest to ``key`` (a known alias first), else the valid keys."""
+    head, _, last = key.rpartition(".")
+    alias = f"{head}.{ALIASES[last]}" if head and last in ALIASES else ALIASES.get(last, "")
+    if alias in valid:
+        return f"; did you mean {alias!r}?"
     close = difflib.get_close_matches(key, list(valid), n=1, cutoff=0.5)
     if not close and "." in key:
         close = difflib.get_close_matches(key.split(".")[-1], [v.split(".")[-1] for v in valid], n=1, cutoff=0.5)
@@ -159,13 +233,24 @@ def suggest(key: str, valid) -> str:
 
 def _as_float(value: Any) -> float | None:
     """A number, or a string like "3e-5" (YAML 1.1 reads an exponent without a dot as a string); else None."""
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
+    if isinstance(value, numbers.Real) and not isinstance(value, bool):  # numpy numbers too (Python callers)
         return float(value)
     if isinstance(value, str):
         try:
             return float(value)
         except ValueError:
             return None
+    return None
+
+
+def _as_int(value: Any) -> int | None:
+    """An int, a numpy int (Python callers) or a whole float like 4.0; else None (bools are not numbers here)."""
+    if isinstance(value, bool):
+        return None
+    if isinstance(value, int):
+        return value
+    if isinstance(value, numbers.Integral) or (isinstance(value, numbers.Real) and float(value).is_integer()):
+        return int(value)
     return None
 
 
@@ -180,10 +265,9 @@ def _coerce(value: Any, hint, where: str, key: str):
         if isinstance(value, bool):
             return value
     elif hint is int:
-        if isinstance(value, int) and not isinstance(value, bool):
-            return value
-        if isinstance(value, float) and value.is_integer():
-            return int(value)
+        number = _as_int(value)
+        if number is not None:
+            return number
     elif hint is float:
         number = _as_float(value)
         if number is not None:

@@ -2,11 +2,11 @@
 
 from dataclasses import dataclass, field
 
-from roshan.config.schema import choice, num
+from roshan.config.schema import Section, choice, num
 
 
 @dataclass(frozen=True)
-class ConvectionConfig:
+class ConvectionConfig(Section):
     """Convection particles: Langevin SDE for hot gas / embers (firespin.md 7.1)."""
 
     enabled: bool = True  # emit_convective
@@ -19,7 +19,7 @@ class ConvectionConfig:
 
 
 @dataclass(frozen=True)
-class RadiationConfig:
+class RadiationConfig(Section):
     """Radiation particles: random walk on a slowly growing circle (firespin.md 7.2)."""
 
     enabled: bool = True  # emit_radiation
@@ -28,7 +28,7 @@ class RadiationConfig:
 
 
 @dataclass(frozen=True)
-class FireConfig:
+class FireConfig(Section):
     """The FireSPIN cellular automaton (firespin.md 1-8)."""
 
     dt: float = num(0.1, 0.0, 10.0, lo_open=True, doc="time step (s)")
@@ -42,7 +42,7 @@ class FireConfig:
 
 
 @dataclass(frozen=True)
-class WindConfig:
+class WindConfig(Section):
     """Constant wind per episode (firespin.md 6)."""
 
     speed: float = num(10.0, 0.0, 100.0, doc="10-m wind speed U_w (m/s)")
@@ -52,7 +52,7 @@ class WindConfig:
 
 
 @dataclass(frozen=True)
-class IgnitionConfig:
+class IgnitionConfig(Section):
     """The initial fire generator (firespin.md 11, newest code)."""
 
     fire_percentage: float = num(0.015, 0.0, 1.0, doc="fraction of all cells to ignite")
@@ -63,7 +63,7 @@ class IgnitionConfig:
 
 
 @dataclass(frozen=True)
-class DroneConfig:
+class DroneConfig(Section):
     """FlyAgent drones (agents.md 1, 3, 4, 14): physics, sensing, start layout and water."""
 
     num_drones: int = num(4, 1, 64, doc="drones per env")
@@ -79,7 +79,7 @@ class DroneConfig:
 
 
 @dataclass(frozen=True)
-class MapConfig:
+class MapConfig(Section):
     """Which land-cover map to simulate."""
 
     name: str = "35x36_Woods"  # bundled map name, "uniform", or a path to a CLC+ GeoTIFF
@@ -89,7 +89,7 @@ class MapConfig:
 
 
 @dataclass(frozen=True)
-class SimConfig:
+class SimConfig(Section):
     """Batch size, seed and where the kernels run: for every command (simulate, train, study trials)."""
 
     envs: int = num(1, 1, doc="environments advanced together (training: the batch the learner collects from)")
