@@ -10,6 +10,9 @@ import taichi as ti
 ARCHES = ("cpu", "cuda", "vulkan", "auto")
 _current: dict[str, object] = {}
 _reset_hooks: list[Callable[[], None]] = []
+# Bumped whenever the runtime is reset or re-initialised: an object that holds fields compares the number it was
+# built under (an int comparison, cheap enough for every step) to refuse use after its fields died.
+_generation = [0]
 
 
 def init_taichi(arch: str = "cpu", threads: int | None = None, debug: bool = False) -> str:
@@ -102,7 +105,21 @@ def on_taichi_reset(hook: Callable[[], None]) -> None:
     _reset_hooks.append(hook)
 
 
+def taichi_generation() -> int:
+    """How many times the Taichi runtime has been reset or re-initialised in this process."""
+    return _generation[0]
+
+
+def check_built_in_this_runtime(generation: int, what: str) -> None:
+    """Raise instead of segfaulting when ``what`` was built (at ``generation``) before Taichi was reset: its
+    fields and kernels belong to a dead runtime."""
+    if generation != _generation[0]:
+        raise RuntimeError(f"{what} was built before Taichi was reset (roshan.runtime.reset_taichi() or "
+                           "init_taichi with other arguments), so its fields are gone; build a new one")
+
+
 def _run_reset_hooks() -> None:
+    _generation[0] += 1
     for hook in _reset_hooks:
         hook()
 

@@ -21,7 +21,7 @@ from roshan.config import Config
 from roshan.episode import EPISODE_FIELDS
 from roshan.kernels.pool import FlySims, PlannerSims
 from roshan.maps import LandCoverMap, load_map
-from roshan.runtime import ensure_taichi, torch_device
+from roshan.runtime import check_built_in_this_runtime, ensure_taichi, taichi_generation, torch_device
 
 
 class VectorEnvCore(gym.vector.VectorEnv):
@@ -44,6 +44,7 @@ class VectorEnvCore(gym.vector.VectorEnv):
 
     def __init__(self, num_envs: int, config: Config | None, seed: int | None, render_mode: str | None):
         ensure_taichi()
+        self._taichi_generation = taichi_generation()  # step/reset refuse to run on a reset runtime
         self.config = cfg = config or Config()
         self.render_mode = render_mode
         self.num_envs = num_envs
@@ -103,6 +104,7 @@ class VectorEnvCore(gym.vector.VectorEnv):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         """Start new episodes in every env; ``seed`` restarts every random stream from that seed."""
+        self._check_runtime("reset()")
         super().reset(seed=seed)
         if seed is not None:
             self.fire.seed = int(seed)
@@ -116,6 +118,8 @@ class VectorEnvCore(gym.vector.VectorEnv):
     @torch.no_grad()
     def step(self, actions):
         """Advance every env by one step; envs that end are reset in the same call."""
+        if self._taichi_generation != taichi_generation():  # inline test: this is the hot path
+            self._check_runtime("step()")
         if not self._has_reset:
             raise gym.error.ResetNeeded(f"{type(self).__name__}.step() before reset(): call reset() first")
         self._advance(actions)
@@ -127,6 +131,9 @@ class VectorEnvCore(gym.vector.VectorEnv):
         info["_episode_stats"] = self.terminations | self.truncations
         info["_final_obs"] = info["_episode_stats"]
         return self._obs, self._rewards, self.terminations, self.truncations, info
+
+    def _check_runtime(self, call: str) -> None:
+        check_built_in_this_runtime(self._taichi_generation, f"{type(self).__name__}.{call}: this env")
 
     def _actions_tensor(self, actions, want: tuple[int, ...], axes: str) -> torch.Tensor:
         """``actions`` (torch, numpy or nested lists) as a tensor of shape ``want`` (its axes named in errors)."""
@@ -140,6 +147,7 @@ class VectorEnvCore(gym.vector.VectorEnv):
 
     def render(self):
         """An RGB frame (H, W, 3) uint8 of env 0: land cover, fire, particles, drones, goals, groundstation."""
+        self._check_runtime("render()")
         return self._viewer.render()
 
     def close(self, **kwargs):

@@ -23,7 +23,7 @@ from roshan.kernels import particles as pt
 from roshan.kernels import rng
 from roshan.kernels.ignition import PATTERNS, light_initial_fires
 from roshan.maps import BURNED, BURNING, CLASSES, FLOODED, GENERIC_UNBURNED, LandCoverMap
-from roshan.runtime import check_field_room, current_arch, ensure_taichi
+from roshan.runtime import check_built_in_this_runtime, check_field_room, current_arch, ensure_taichi, taichi_generation
 
 # Cell records: integers (state, flags, visit stamp, emission periods) and f64 timers (seconds).
 C_STATE, C_FLAGS, C_VISIT, C_PERIODS = range(4)
@@ -93,6 +93,7 @@ class FireSim:
                  ignition: IgnitionConfig | None = None, num_envs: int = 1, seed: int = 0):
         ensure_taichi()
         check_field_room("FireSim")
+        self._taichi_generation = taichi_generation()  # reset/step refuse to run on a reset runtime
         self.land_map = land
         self.fire_cfg = fire = fire or FireConfig()
         self.wind_cfg = wind = wind or WindConfig()
@@ -194,6 +195,7 @@ class FireSim:
         Clears every cell (its durations are redrawn when first needed), particles and lists, draws the wind
         and lights the initial fires.
         """
+        check_built_in_this_runtime(self._taichi_generation, "FireSim.reset(): this simulator")
         mask = self._all if mask is None else self.int32_array(mask, (self.num_envs,), "reset mask")
         self._reset_envs(mask, self.seed_key)
 
@@ -204,6 +206,7 @@ class FireSim:
 
     def step(self, n: int = 1) -> None:
         """Advance every env by ``n`` fire updates (n * dt seconds) in one kernel launch."""
+        check_built_in_this_runtime(self._taichi_generation, "FireSim.step(): this simulator")
         if n > 0:
             self._advance(n)
 
