@@ -1,0 +1,47 @@
+"""A checkpoint that does not fit the model, optimiser or setting it is loaded into is refused before loading,
+with one line that names the file and the differing keys (never a traceback from deep inside torch)."""
+
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from roshan.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+TINY = ["--set", "sim.envs=4", "--set", "ppo.horizon=128", "--set", "ppo.batch_size=64",
+        "--set", "train.total_steps=0", "--set", "train.max_minutes=0"]
+
+
+def cli(*args):
+    # catch_exceptions=False: an uncaught exception (a traceback for the user) fails the test instead of exit 1
+    return CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
+
+
+def refused(res, *names: str) -> str:
+    assert res.exit_code == 1, res.output
+    assert "Traceback" not in res.output
+    for name in names:
+        assert name in res.output, res.output
+    return res.output
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory) -> Path:
+    """One tiny FlyAgent PPO run that made a step (so its Adam optimiser has state)."""
+    root = tmp_path_factory.mktemp("runs")
+    res = cli("train", ROOT / "configs/fly_simple.yaml", "--root", root, "--name", "r", "--no-eval", "--quiet",
+              *TINY, "--set", "train.max_updates=1")
+    assert res.exit_code == 0, res.output
+    return root / "r"
+
+
+def test_resume_with_another_optimiser_family_is_refused(run):
+    out = refused(cli("train", "--resume", run, "--no-eval", "--quiet", "--set", "ppo.optim.name=sgd",
+                      "--set", "train.max_updates=2"), "latest.pt", "ppo.optim.name", "'sgd'", "'adam'")
+    assert "momentum" not in out
+
+
+def test_resume_with_separate_optimizers_is_refused(run):
+    refused(cli("train", "--resume", run, "--no-eval", "--quiet", "--set", "ppo.separate_optimizers=true",
+                "--set", "train.max_updates=2"), "latest.pt", "ppo.separate_optimizers")
