@@ -4,8 +4,10 @@ with one line that names the file and the differing keys (never a traceback from
 from pathlib import Path
 
 import pytest
+import torch
 from click.testing import CliRunner
 
+from roshan.checkpoints import checkpoint_path
 from roshan.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -45,3 +47,36 @@ def test_resume_with_another_optimiser_family_is_refused(run):
 def test_resume_with_separate_optimizers_is_refused(run):
     refused(cli("train", "--resume", run, "--no-eval", "--quiet", "--set", "ppo.separate_optimizers=true",
                 "--set", "train.max_updates=2"), "latest.pt", "ppo.separate_optimizers")
+
+
+def test_a_checkpoint_with_changed_weight_shapes_is_refused(run, tmp_path):
+    path = checkpoint_path(run, "latest")
+    state = torch.load(path, map_location="cpu", weights_only=False)
+    state["agent"]["net"]["log_std"] = torch.zeros(3)
+    bad = tmp_path / "bad.pt"
+    torch.save(state, bad)
+    out = refused(cli("eval", bad, "--episodes", 1, "--envs", 1, "--quiet", "--out", tmp_path / "eval"),
+                  "bad.pt", "net.log_std", "(2,) here but (3,) in the checkpoint")
+    assert "size mismatch" not in out
+
+
+def test_planner_eval_with_another_drone_count_is_refused(tmp_path):
+    refused(cli("eval", ROOT / "models/planner", "--episodes", 1, "--envs", 1, "--quiet", "--out", tmp_path,
+                "--set", "drones.num_drones=2"), "drones.num_drones", "2", "4")
+
+
+def test_flyagent_eval_with_other_frames_is_refused(tmp_path):
+    refused(cli("eval", ROOT / "models/fly_simple", "--episodes", 1, "--envs", 1, "--quiet", "--out", tmp_path,
+                "--set", "fly.frames=2"), "fly.frames")
+
+
+def test_a_planner_checkpoint_as_fly_model_is_refused(tmp_path):
+    refused(cli("eval", ROOT / "models/planner", "--episodes", 1, "--envs", 1, "--quiet", "--out", tmp_path,
+                "--set", "planner.fly_model=models/planner"),
+            "planner.fly_model", "is a planner checkpoint", "needs a FlyAgent run")
+
+
+def test_save_buffer_of_a_planner_is_refused(tmp_path):
+    refused(cli("eval", ROOT / "models/planner", "--quiet", "--save-buffer", 10, tmp_path / "b.pt"),
+            "replay buffers record FlyAgent transitions")
+    assert not (tmp_path / "b.pt").exists()
