@@ -39,9 +39,11 @@ def run(tmp_path_factory) -> Path:
 
 
 def test_resume_with_another_optimiser_family_is_refused(run):
+    before = (run / "config.yaml").read_text()
     out = refused(cli("train", "--resume", run, "--no-eval", "--quiet", "--set", "ppo.optim.name=sgd",
                       "--set", "train.max_updates=2"), "latest.pt", "ppo.optim.name", "'sgd'", "'adam'")
     assert "momentum" not in out
+    assert (run / "config.yaml").read_text() == before  # a refused resume leaves the run folder as it was
 
 
 def test_resume_with_separate_optimizers_is_refused(run):
