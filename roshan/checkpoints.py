@@ -135,17 +135,107 @@ def config_of_checkpoint(state: dict, where: str) -> Config:
         raise ValueError(f"{where}: the checkpoint's config does not fit this version ({exc})") from exc
 
 
+class CheckpointMismatch(ValueError):
+    """A checkpoint that does not fit the model, optimisers or setting it is loaded into."""
+
+
+def setting(cfg: Config, key: str):
+    """The value of a dotted config key (``ppo.optim.name``)."""
+    value = cfg
+    for part in key.split("."):
+        value = getattr(value, part)
+    return value
+
+
+def model_keys(cfg: Config) -> tuple[str, ...]:
+    """The config keys that decide the network shapes of ``cfg.train.algo`` and the observations it serves."""
+    algo = cfg.train.algo
+    if algo == "planner":  # one network over all drones: their count is in its shapes
+        return "train.algo", "planner.network", "drones.num_drones"
+    section = "ppo" if algo == "ppo" else algo
+    return "train.algo", "fly.collision", "fly.frames", f"{section}.share_encoder"
+
+
+def optimiser_keys(cfg: Config) -> tuple[str, ...]:
+    """The config keys whose optimiser state a resume loads: another family (Adam's moments into SGD) or another
+    count of optimisers cannot take it."""
+    algo = cfg.train.algo
+    if algo in ("ppo", "planner"):  # a run without RND resumes from one with it (its RND state is not read)
+        return "ppo.optim.name", "ppo.separate_optimizers", *(("rnd.enabled",) if cfg.rnd.enabled else ())
+    return (f"{algo}.optim.name",)
+
+
+def config_differences(cfg: Config, saved: Config, keys) -> list[str]:
+    pairs = {k: (setting(cfg, k), setting(saved, k)) for k in keys}
+    return [f"{k} = {a!r} here but {b!r} in the checkpoint" for k, (a, b) in pairs.items() if a != b]
+
+
+def is_optimiser_state(obj) -> bool:
+    return isinstance(obj, dict) and set(obj) == {"state", "param_groups"}
+
+
+def state_layout(obj, prefix: str = "", out: dict | None = None) -> dict[str, str]:
+    """What of a (nested) state dict decides whether it loads, by dotted name: each tensor's shape, and each
+    optimiser's parameter count per group (its per-parameter state is empty before the first step, so it is
+    not compared). Counters, rates and schedules hold no tensors and are left out: they load into any model."""
+    out = {} if out is None else out
+    if isinstance(obj, torch.Tensor):
+        out[prefix] = f"shape {tuple(obj.shape)}"
+    elif is_optimiser_state(obj):
+        for i, group in enumerate(obj["param_groups"]):
+            out[f"{prefix}.param_groups[{i}]"] = f"{len(group['params'])} parameters"
+    elif isinstance(obj, dict):
+        for k, v in obj.items():
+            state_layout(v, f"{prefix}.{k}" if prefix else str(k), out)
+    elif isinstance(obj, list | tuple):
+        for i, v in enumerate(obj):
+            state_layout(v, f"{prefix}[{i}]", out)
+    return out
+
+
+def layout_differences(here: dict, saved: dict) -> list[str]:
+    """Every name whose shape or count differs between two state dicts, or that only one of them has."""
+    a, b = state_layout(here), state_layout(saved)
+    diffs = []
+    for name in sorted(a.keys() | b.keys()):
+        if name not in b:
+            diffs.append(f"{name} not in the checkpoint")
+        elif name not in a:
+            diffs.append(f"{name} in the checkpoint only")
+        elif a[name] != b[name]:
+            diffs.append(f"{name} {a[name]} here but {b[name].removeprefix('shape ')} in the checkpoint")
+    return diffs
+
+
+def raise_mismatch(where: str, diffs: list[str], limit: int = 8) -> None:
+    """One line naming the file and the differing keys (the first ``limit``: a whole network of another shape
+    would otherwise fill the screen)."""
+    if diffs:
+        more = f"; and {len(diffs) - limit} more" if len(diffs) > limit else ""
+        raise CheckpointMismatch(f"{where}: checkpoint from another config, it does not fit this one: "
+                                 + "; ".join(diffs[:limit]) + more)
+
+
 def check_same_model(cfg: Config, saved: Config, where: str) -> None:
     """Resuming or fine-tuning needs the same network shapes: compare the keys that decide them."""
-    keys = {"fly.collision": (cfg.fly.collision, saved.fly.collision),
-            "fly.frames": (cfg.fly.frames, saved.fly.frames),
-            "drones.num_drones": (cfg.drones.num_drones, saved.drones.num_drones),
-            "train.algo": (cfg.train.algo, saved.train.algo),
-            "ppo.share_encoder": (cfg.ppo.share_encoder, saved.ppo.share_encoder),
-            "planner.network": (cfg.planner.network, saved.planner.network)}
-    bad = [f"{k} = {a!r} here but {b!r} in the checkpoint" for k, (a, b) in keys.items() if a != b]
-    if bad:
-        raise ValueError(f"{where}: checkpoint from another config: " + "; ".join(bad))
+    raise_mismatch(where, config_differences(cfg, saved, dict.fromkeys(model_keys(cfg) + model_keys(saved))))
+
+
+def check_fits(agent, agent_state: dict, cfg: Config, saved: Config, where: str, weights_only: bool) -> None:
+    """Refuse, before anything is loaded, a checkpoint (``agent_state``, its ``saved`` config) that does not fit
+    ``agent`` built for ``cfg``: the config keys of its networks (and, unless ``weights_only``, of its
+    optimisers), then every parameter name and shape; ``weights_only`` compares only ``agent.weight_keys``."""
+    keys = model_keys(cfg) + model_keys(saved)
+    if not weights_only and cfg.train.algo == saved.train.algo:
+        keys += optimiser_keys(cfg)
+    diffs = config_differences(cfg, saved, dict.fromkeys(keys))
+    here = agent.state_dict()
+    if weights_only:
+        here = {k: v for k, v in here.items() if k in agent.weight_keys}
+    agent_state = {k: v for k, v in agent_state.items() if k in here}  # what the agent does not load is not read
+    if not diffs or cfg.train.algo == saved.train.algo:  # another algorithm: its names would only repeat that
+        diffs += layout_differences(here, agent_state)
+    raise_mismatch(where, diffs)
 
 
 def config_dict(cfg: Config) -> dict:

@@ -15,6 +15,9 @@ class Agent(Protocol):
     actions; IQL's is ``log_prob``.
     """
 
+    # the state_dict entries a weights-only load (evaluation, fine-tuning) reads: the networks
+    weight_keys: tuple[str, ...]
+
     def act(self, obs: dict[str, torch.Tensor], generator: torch.Generator | None = None) -> torch.Tensor:
         """The actions the agent explores with while collecting: PPO samples its policy, TD3 adds Gaussian noise,
         IQL executes its noise-free action (as the reference does)."""

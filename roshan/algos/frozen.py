@@ -7,7 +7,16 @@ import torch
 
 from roshan.algos.agent import Agent
 from roshan.algos.agents import make_agent
-from roshan.checkpoints import config_of_checkpoint, load_checkpoint, resolve_checkpoint
+from roshan.checkpoints import (
+    CheckpointMismatch,
+    check_fits,
+    config_differences,
+    config_of_checkpoint,
+    load_checkpoint,
+    model_keys,
+    resolve_checkpoint,
+)
+from roshan.config import Config
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
@@ -18,8 +27,46 @@ def load_agent(target: str | Path, which: str = "best", device: str | torch.devi
     state = load_checkpoint(path)
     cfg = config_of_checkpoint(state, str(path))
     agent = make_agent(cfg, device)
+    # the networks are built from the checkpoint's own config, so only an edited or foreign file fails here
+    check_fits(agent, state["agent"], cfg, cfg, str(path), weights_only=True)
     agent.load_state_dict(state["agent"], weights_only=True)
     return cfg, agent, path
+
+
+def fly_model_path(target: str | Path, key: str) -> Path:
+    """A planner's low-level FlyAgent (``key``: planner.fly_model / planner.explorer_model): a run folder or
+    checkpoint, relative to the repository when it is not found where the command runs."""
+    path = Path(target)
+    if not path.exists() and not path.is_absolute() and (REPO_ROOT / path).exists():
+        path = REPO_ROOT / path  # configs name the shipped models relative to the repository
+    if not path.exists():
+        raise FileNotFoundError(f"planner low-level FlyAgent {str(target)!r}: no such run folder or checkpoint "
+                                f"(set {key})")
+    return path
+
+
+def check_fly_model(target: str | Path, key: str = "planner.fly_model") -> None:
+    """Refuse a planner checkpoint as a low-level FlyAgent before any env is built: it would be asked to act on
+    drone observations it has never seen."""
+    path = resolve_checkpoint(fly_model_path(target, key))
+    refuse_planner(config_of_checkpoint(load_checkpoint(path), str(path)), target, path, key)
+
+
+def refuse_planner(cfg: Config, target: str | Path, path: Path, key: str) -> None:
+    if cfg.train.algo == "planner":
+        raise ValueError(f"{key} = {str(target)!r}: {path} is a planner checkpoint; {key} needs a FlyAgent run")
+
+
+def check_setting(trained: Config, cfg: Config, where: str | Path) -> None:
+    """Refuse, before any env is built, an evaluation setting (``cfg``: the checkpoint's config plus --set) that
+    the network trained under ``trained`` cannot serve: other observation shapes (drones of a planner, frames or
+    collision of a FlyAgent), or a planner checkpoint as the planner's low-level FlyAgents."""
+    diffs = config_differences(cfg, trained, model_keys(trained))
+    if diffs:
+        raise CheckpointMismatch(f"{where}: the network cannot serve this setting: " + "; ".join(diffs))
+    if cfg.train.algo == "planner":
+        check_fly_model(cfg.planner.fly_model, "planner.fly_model")
+        check_fly_model(cfg.planner.explorer_model, "planner.explorer_model")
 
 
 def policy_fn(agent: Agent):
@@ -31,14 +78,10 @@ def policy_fn(agent: Agent):
 class FrozenFlyPolicy:
     """A trained FlyAgent (run folder or checkpoint) as a deterministic controller of a drone group."""
 
-    def __init__(self, target: str | Path, device: str | torch.device = "cpu"):
-        path = Path(target)
-        if not path.exists() and not path.is_absolute() and (REPO_ROOT / path).exists():
-            path = REPO_ROOT / path  # configs name the shipped models relative to the repository
-        if not path.exists():
-            raise FileNotFoundError(f"planner low-level FlyAgent {str(target)!r}: no such run folder or checkpoint "
-                                    "(set planner.fly_model / planner.explorer_model)")
+    def __init__(self, target: str | Path, device: str | torch.device = "cpu", key: str = "planner.fly_model"):
+        path = fly_model_path(target, key)
         self.config, agent, self.path = load_agent(path, device=device)
+        refuse_planner(self.config, target, self.path, key)
         self.frames = self.config.fly.frames
         self._act = policy_fn(agent)
 

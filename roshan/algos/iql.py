@@ -49,6 +49,8 @@ def iql_q_loss(q1: torch.Tensor, q2: torch.Tensor, rewards: torch.Tensor, not_do
 class IQL:
     """Mean actor, twin critic with a target copy, and a value net; three optimisers with a scheduler each."""
 
+    weight_keys = ("actor", "critic", "value")  # the target critic is copied from the critic
+
     def __init__(self, cfg: IQLConfig, collision: bool, frames: int = 3, device: str | torch.device = "cpu"):
         self.cfg = cfg
         self.collision, self.frames = collision, frames

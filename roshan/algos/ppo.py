@@ -99,6 +99,8 @@ def explained_variance(values: torch.Tensor, returns: torch.Tensor) -> float:
 class PPO:
     """A policy and its PPO update: optimisers, schedules, the reward scaler, GAE and the minibatch epochs."""
 
+    weight_keys = ("net",)
+
     def __init__(self, cfg: PPOConfig, policy: Policy, device: str | torch.device = "cpu",
                  rnd: RNDConfig | None = None):
         if cfg.separate_optimizers and policy.shares_encoder:

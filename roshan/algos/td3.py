@@ -46,6 +46,8 @@ def randn(shape: tuple[int, ...], generator: torch.Generator | None, device: tor
 class TD3:
     """Deterministic actor, twin critic and their target copies, with one optimiser and scheduler each."""
 
+    weight_keys = ("actor", "critic")  # the targets are copied from them on a weights-only load
+
     def __init__(self, cfg: TD3Config, collision: bool, frames: int = 3, device: str | torch.device = "cpu"):
         self.cfg = cfg
         self.collision, self.frames = collision, frames

@@ -59,7 +59,8 @@ class PlannerVectorEnv(VectorEnvCore):
         self.fly_policy = fly_policy or FrozenFlyPolicy(pc.fly_model, torch_device())
         self.explorer_policy = None
         if evaluation or controller == "greedy":  # in planner training the explorers wait at the groundstation
-            self.explorer_policy = explorer_policy or FrozenFlyPolicy(pc.explorer_model, torch_device())
+            self.explorer_policy = explorer_policy or FrozenFlyPolicy(pc.explorer_model, torch_device(),
+                                                                      key="planner.explorer_model")
         ex_frames = self.explorer_policy.frames if self.explorer_policy else 1
         super().__init__(num_envs, config, seed, render_mode)
         n, m = self.num_drones, pc.num_explorers

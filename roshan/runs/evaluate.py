@@ -15,7 +15,7 @@ import torch
 from tqdm import tqdm
 
 from roshan.algos.buffers import ReplayBuffer
-from roshan.algos.frozen import load_agent, policy_fn
+from roshan.algos.frozen import check_setting, load_agent, policy_fn
 from roshan.algos.networks import flatten_drones
 from roshan.config import apply_overrides
 from roshan.env.fly import FlyVectorEnv
@@ -138,8 +138,9 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
     layouts and wind) and its summary is returned under ``"baseline"``.
     Returns the summary dict of :func:`roshan.runs.report.stats.summarize` plus ``checkpoint`` and ``out_dir``."""
     ensure_taichi()
-    cfg, agent, path = load_agent(target, which, torch_device())
-    cfg = apply_overrides(cfg, overrides) if overrides else cfg
+    trained, agent, path = load_agent(target, which, torch_device())
+    cfg = apply_overrides(trained, overrides) if overrides else trained
+    check_setting(trained, cfg, path)
     E = max(1, min(num_envs or cfg.train.eval_envs, episodes))
     env = make_env(cfg, E, seed, evaluation=True)
     scratch = None
@@ -193,8 +194,12 @@ def save_buffer(target: str | Path, transitions: int, path: Path, seed: int = 0,
     dataset of learning.md 8: raw rewards, per-drone not_done, next observations; the env's ``final_obs`` is
     the next observation where an episode ended, and only a real terminal sets not_done = 0)."""
     ensure_taichi()
-    cfg, agent, _ = load_agent(target, which, torch_device())
-    cfg = apply_overrides(cfg, overrides) if overrides else cfg
+    trained, agent, ckpt = load_agent(target, which, torch_device())
+    if trained.train.algo == "planner":
+        raise ValueError(f"{ckpt}: a planner checkpoint; replay buffers record FlyAgent transitions (--save-buffer "
+                         "needs a FlyAgent run)")
+    cfg = apply_overrides(trained, overrides) if overrides else trained
+    check_setting(trained, cfg, ckpt)
     E = num_envs or cfg.train.eval_envs
     env = FlyVectorEnv(num_envs=E, config=cfg, fly=cfg.fly, seed=seed)
     N = env.num_drones

@@ -26,6 +26,7 @@ from roshan.algos.buffers import ReplayBuffer
 from roshan.algos.frozen import policy_fn
 from roshan.algos.networks import flatten_drones
 from roshan.checkpoints import (
+    check_fits,
     check_same_model,
     checkpoint_path,
     config_dict,
@@ -261,13 +262,17 @@ class Trainer:
         """Fine-tuning: the networks (not optimisers, counters or the reward scaler) of another run's checkpoint."""
         path = resolve_checkpoint(target)
         state = load_checkpoint(path)
-        check_same_model(self.cfg, config_of_checkpoint(state, str(path)), str(path))
+        saved = config_of_checkpoint(state, str(path))
+        check_fits(self.agent, state["agent"], self.cfg, saved, str(path), weights_only=True)
         self.agent.load_state_dict(state["agent"], weights_only=True)
         scaler = getattr(self.agent, "scaler", None)
         if scaler is not None and "scaler" in state["agent"]:  # the values were learned on that reward scale
             scaler.load_state_dict(state["agent"]["scaler"])
 
     def _restore(self, state: dict) -> None:
+        # the whole state (optimisers too) is checked first: torch would fail halfway, or at the first step
+        where = str(checkpoint_path(self.run_dir, "latest"))
+        check_fits(self.agent, state["agent"], self.cfg, config_of_checkpoint(state, where), where, weights_only=False)
         self.agent.load_state_dict(state["agent"])
         for k, v in state["progress"].items():
             setattr(self.progress, k, v)
@@ -398,7 +403,11 @@ def resume_config(run_dir: str | Path, overrides: list[str] | tuple[str, ...] = 
     run_dir = Path(run_dir)
     latest = checkpoint_path(run_dir, "latest")
     if latest.is_file():
-        cfg = apply_overrides(config_of_checkpoint(load_checkpoint(latest), str(latest)), overrides)
+        state = load_checkpoint(latest)
+        cfg = apply_overrides(config_of_checkpoint(state, str(latest)), overrides)
+        # before config.yaml takes the overrides: a refused resume leaves the run folder as it was
+        check_fits(make_agent(cfg), state["agent"], cfg, config_of_checkpoint(state, str(latest)), str(latest),
+                   weights_only=False)
     else:
         path = run_dir / "config.yaml"
         if not path.is_file() or not path.read_text().strip():
