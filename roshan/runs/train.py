@@ -319,8 +319,6 @@ class Trainer:
                 self.writer.close()  # flushes the last events: a full disk can show only here
         except OutputError as exc:
             raise self._stopped(exc) from None
-        except OSError as exc:  # TensorBoard's writer thread re-raises its failure at any later add_scalar
-            raise self._stopped(OutputError("training output", exc.filename or self.run_dir, exc)) from None
         finally:
             bar.close()
             with contextlib.suppress(OSError):  # after a failure: the events written so far stay, nothing more can
@@ -396,8 +394,9 @@ class Trainer:
             self.eval_env = make_env(self.cfg, min(tc.eval_envs, tc.eval_episodes), seed=seed, evaluation=True)
         episodes = run_episodes(self.eval_env, policy_fn(self.agent), tc.eval_episodes, seed=seed, progress_bar=False)
         summary = summarize(episodes)
-        for tag, value in evaluation_scalars(summary).items():
-            self.writer.add_scalar(tag, value, self.log_step)
+        with writing("TensorBoard events", self.run_dir / "tb"):  # the writer thread's failure shows at any add
+            for tag, value in evaluation_scalars(summary).items():
+                self.writer.add_scalar(tag, value, self.log_step)
         # The deterministic policy is what gets shipped, and in the collision setting it can be much better or worse
         # than the stochastic training objective says: keep the weights that evaluated best.
         if summary["success_rate"] >= self.progress.best_eval:
