@@ -76,15 +76,20 @@ def simulate(config_path, map_name, envs, steps, seed, fire_percentage, clusters
     overrides = [f"{k}={v}" for k, v in flags.items() if v is not None] + list(sets)
     try:
         cfg = load_config(config_path, overrides)
+        sim_mod.prepare_outputs(Path(frames) if frames else None, Path(gif) if gif else None,
+                                Path(json_path) if json_path else None)
         result = sim_mod.run_simulation(cfg, steps, every, Path(frames) if frames else None,
                                         Path(gif) if gif else None, progress=not quiet, drones=drones,
                                         policy=policy or "greedy")
-    except (ConfigError, MapError, ValueError, FileNotFoundError) as exc:
+    except (ConfigError, MapError, ValueError, OSError) as exc:
         _fail(exc)
     for line in sim_mod.summary_lines(result):
         click.echo(line)
     if json_path:
-        sim_mod.write_json(cfg, result, Path(json_path))
+        try:
+            sim_mod.write_json(cfg, result, Path(json_path))
+        except ValueError as exc:  # OutputError: the disk filled up meanwhile
+            _fail(exc)
         click.echo(f"json: {json_path}")
 
 
@@ -176,7 +181,7 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
         else:
             cfg = load_run_config(config_path, overrides)
             results = tr.train_auto(cfg, root, name, progress_bar=not quiet, evaluate_at_end=not no_eval)
-    except (ConfigError, MapError, ValueError, FileNotFoundError, RunBusy) as exc:
+    except (ConfigError, MapError, ValueError, OSError, RunBusy) as exc:
         _fail(exc)
     for res in results:
         click.echo(tr.result_lines(res))
@@ -231,7 +236,7 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, frames_dir
                                   frames_dir=Path(frames_dir) if frames_dir else None,
                                   gif_path=Path(gif_path) if gif_path else None, which=which,
                                   progress_bar=not quiet, overrides=sets, baseline=baseline)
-    except (ConfigError, MapError, ValueError, FileNotFoundError) as exc:
+    except (ConfigError, MapError, ValueError, OSError) as exc:
         _fail(exc)
     title = f"{target} ({Path(summary['checkpoint']).stem}, seed {seed})"
     if baseline is not None:
@@ -306,7 +311,7 @@ def study_run(config_path, space_path, trials, storage, workers, name, root, res
                     max_retry=max_retry, echo=click.echo, objective=objective, seed=seed,
                     startup_trials=startup_trials, prune=prune, prune_startup=prune_startup,
                     prune_warmup=prune_warmup)
-    except (ConfigError, MapError, ValueError, FileNotFoundError) as exc:
+    except (ConfigError, MapError, ValueError, OSError) as exc:
         _fail(exc)
 
 
@@ -327,7 +332,7 @@ def study_report(target, name, root, top_k, out_dir, no_plots):
     try:
         stu, default_out = open_for_report(target, root, name)
         rep = write_report(stu, Path(out_dir) if out_dir else default_out, top_k, plots=not no_plots)
-    except (ConfigError, ValueError, FileNotFoundError) as exc:
+    except (ConfigError, ValueError, OSError) as exc:
         _fail(exc)
     click.echo(f"study {stu.study_name}: {len(stu.trials)} trials; the best completed:")
     click.echo(rep["table"])

@@ -1,4 +1,5 @@
-"""Files the project writes whole: atomic writes (a reader never sees half a file) and GIFs of frames."""
+"""Files the project writes whole: atomic writes (a reader never sees half a file), GIFs of frames, and the
+one error a command gives when it cannot write its output (:class:`OutputError`)."""
 
 import contextlib
 import os
@@ -9,6 +10,46 @@ from typing import BinaryIO
 
 import numpy as np
 from PIL import Image
+
+
+class OutputError(ValueError):
+    """A file or folder a command must write cannot be written: "cannot write <what> to <path>: <reason>".
+    A ValueError, so that every command reports it as one line, like a bad option."""
+
+    def __init__(self, what: str, path: str | os.PathLike, reason: OSError | str):
+        self.what, self.path = what, Path(path)
+        self.reason = reason if isinstance(reason, str) else (reason.strerror or str(reason))
+        super().__init__(f"cannot write {what} to {path}: {self.reason}")
+
+
+@contextlib.contextmanager
+def writing(what: str, path: str | os.PathLike) -> Iterator[None]:
+    """Turn an OSError of the block (full disk, read-only folder, permission...) into an :class:`OutputError`
+    that names ``what`` was being written and where."""
+    try:
+        yield
+    except OutputError:
+        raise
+    except OSError as exc:
+        raise OutputError(what, path, exc) from exc
+
+
+def prepare_output(path: str | os.PathLike, what: str, is_dir: bool = True) -> Path:
+    """Make sure ``path`` (a folder, or with ``is_dir=False`` a file) can be written before the work that fills
+    it starts: missing folders are created and a probe file is created and removed in the folder (permission
+    bits say nothing to root and nothing about a read-only mount or a full disk). Raises :class:`OutputError`."""
+    path = Path(path)
+    folder = path if is_dir else path.parent
+    if not is_dir and path.is_dir():
+        raise OutputError(what, path, "it is a folder")
+    if folder.exists() and not folder.is_dir():
+        raise OutputError(what, path, f"{folder} is a file, not a folder")
+    with writing(what, path):
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".roshan-probe-")
+        os.close(fd)
+        os.unlink(probe)
+    return path
 
 
 @contextlib.contextmanager

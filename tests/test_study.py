@@ -392,6 +392,47 @@ def test_a_killed_study_resumes_where_it_stopped(tmp_path):
     assert "trial 1: success = " in r.output and "best: trial 1" in r.output
 
 
+def test_a_journal_with_a_cut_last_record_is_named_and_repaired_by_resume(tmp_path):
+    sets = sum((["--set", s] for s in TINY), [])
+    r = CliRunner().invoke(main, ["study", str(CONFIG), "--space", str(_space_file(tmp_path)), "--trials", "1",
+                                  "--root", str(tmp_path), "--name", "j", "--quiet", *sets])
+    assert r.exit_code == 0, r.output
+    journal = tmp_path / "j" / "study.journal"
+    with open(journal, "r+b") as f:  # what a full disk leaves: the last record cut (truncate -s -40)
+        f.truncate(journal.stat().st_size - 40)
+    cut = journal.read_bytes()
+    report = ["study", "report", "j", "--root", str(tmp_path), "--no-plots"]
+    r = CliRunner().invoke(main, report)
+    assert r.exit_code == 1 and isinstance(r.exception, SystemExit), r.output
+    assert str(journal) in r.output and "is cut" in r.output and "--resume --name j" in r.output
+    assert journal.read_bytes() == cut  # a report never rewrites the journal
+    r = CliRunner().invoke(main, ["study", "--resume", "--name", "j", "--trials", "2", "--root", str(tmp_path),
+                                  "--quiet"])
+    assert r.exit_code == 0, r.output
+    (copy,) = journal.parent.glob("study.journal.damaged-*")
+    assert copy.read_bytes() == cut and f"the original is kept as {copy}" in r.output
+    assert "was cut; dropped it" in r.output
+    r = CliRunner().invoke(main, report)
+    assert r.exit_code == 0, r.output
+    study = optuna.load_study(study_name="j", storage=open_storage(str(journal), heartbeat=None))
+    assert len([t for t in study.trials if t.state == TrialState.COMPLETE]) >= 1
+
+
+def test_a_journal_damaged_before_its_last_line_is_refused_with_the_line(tmp_path):
+    journal = tmp_path / "s.journal"
+    storage = open_storage(str(journal), heartbeat=None)
+    for name in ("a", "b", "c"):
+        optuna.create_study(study_name=name, storage=storage)
+    lines = journal.read_bytes().splitlines(keepends=True)
+    lines[1] = lines[1][:10] + b"\n"
+    journal.write_bytes(b"".join(lines))
+    damaged = journal.read_bytes()
+    for repair in (True, False):
+        with pytest.raises(StudyError, match=f"{journal}: line 2 of the study journal is damaged"):
+            open_storage(str(journal), heartbeat=None, repair=repair)
+    assert journal.read_bytes() == damaged and not list(tmp_path.glob("*.damaged-*"))
+
+
 def test_ctrl_c_fails_the_running_trial_and_queues_it_again(tmp_path):
     proc = launch(tmp_path, "c", "--trials", "1")
     journal, log = tmp_path / "c" / "study.journal", tmp_path / "c.log"

@@ -21,7 +21,7 @@ from roshan.config import apply_overrides
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import straight_to_goal
 from roshan.episode import EPISODE_FIELDS, REASONS
-from roshan.io import write_gif
+from roshan.io import prepare_output, write_gif, writing
 from roshan.runs.envs import make_env
 from roshan.runs.report.files import write_episodes_csv, write_summary_json
 from roshan.runs.report.plots import plot_comparison, plot_episodes, plot_learning_curves
@@ -108,8 +108,24 @@ def planner_random_fn(seed: int):
     return act
 
 
+def prepare_outputs(out_dir: Path, json_path: Path | None, frames_dir: Path | None, gif_path: Path | None) -> None:
+    """Create the evaluation's output folders and check they can be written before any episode runs."""
+    prepare_output(out_dir, "evaluation files")
+    if json_path is not None:
+        prepare_output(json_path, "the evaluation JSON", is_dir=False)
+    if frames_dir is not None:
+        prepare_output(frames_dir, "frames")
+    if gif_path is not None:
+        prepare_output(gif_path, "the GIF", is_dir=False)
+
+
 def write_outputs(episodes: dict, out_dir: Path, title: str) -> dict:
     """episodes.csv, summary.json and the plots in ``out_dir``; returns the summary."""
+    with writing("evaluation files", out_dir):
+        return _write_outputs(episodes, out_dir, title)
+
+
+def _write_outputs(episodes: dict, out_dir: Path, title: str) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = summarize(episodes)
     write_episodes_csv(episodes, out_dir / "episodes.csv")
@@ -141,6 +157,9 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
     trained, agent, path = load_agent(target, which, torch_device())
     cfg = apply_overrides(trained, overrides) if overrides else trained
     check_setting(trained, cfg, path)
+    run_dir = path.parent.parent if path.parent.name == "checkpoints" else path.parent
+    out = Path(out_dir) if out_dir else run_dir / "eval"
+    prepare_outputs(out, json_path, frames_dir, gif_path)
     E = max(1, min(num_envs or cfg.train.eval_envs, episodes))
     env = make_env(cfg, E, seed, evaluation=True)
     scratch = None
@@ -160,8 +179,6 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         base_eps = run_episodes(env, baseline_fn(baseline, E, env.num_drones, seed), episodes, seed,
                                 progress_bar=progress_bar)
     env.close()
-    run_dir = path.parent.parent if path.parent.name == "checkpoints" else path.parent
-    out = Path(out_dir) if out_dir else run_dir / "eval"
     summary = write_outputs(eps, out, f"{run_dir.name} ({path.stem}, {len(eps['reward'])} episodes, seed {seed})")
     tb = run_dir / "tb"
     if tb.is_dir():
@@ -176,10 +193,11 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         payload = {"policy": payload, baseline: flyagent_json(base, env.failure_reasons)}
         summary["baseline"] = base
     if json_path is not None:
-        Path(json_path).parent.mkdir(parents=True, exist_ok=True)
-        Path(json_path).write_text(json.dumps(payload, indent=2) + "\n")
+        with writing("the evaluation JSON", json_path):
+            Path(json_path).write_text(json.dumps(payload, indent=2) + "\n")
     if gif_path is not None:
-        write_gif(sorted(Path(frames_dir).glob("frame_*.png")), Path(gif_path))
+        with writing("the GIF", gif_path):
+            write_gif(sorted(Path(frames_dir).glob("frame_*.png")), Path(gif_path))
     if scratch is not None:
         scratch.cleanup()
     summary["checkpoint"], summary["out_dir"] = str(path), str(out)
@@ -200,6 +218,7 @@ def save_buffer(target: str | Path, transitions: int, path: Path, seed: int = 0,
                          "needs a FlyAgent run)")
     cfg = apply_overrides(trained, overrides) if overrides else trained
     check_setting(trained, cfg, ckpt)
+    prepare_output(path, "the replay buffer", is_dir=False)
     E = num_envs or cfg.train.eval_envs
     env = FlyVectorEnv(num_envs=E, config=cfg, fly=cfg.fly, seed=seed)
     N = env.num_drones
@@ -222,5 +241,6 @@ def save_buffer(target: str | Path, transitions: int, path: Path, seed: int = 0,
                 {k: v[:take] for k, v in nxt.items()})
         bar.update(take)
     bar.close()
-    buf.save(path)
+    with writing("the replay buffer", path):
+        buf.save(path)
     return f"wrote {len(buf)} transitions to {path}"

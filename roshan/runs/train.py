@@ -7,6 +7,7 @@ budget. A killed run resumes from ``latest`` with its counters, optimisers, rewa
 """
 
 import collections
+import contextlib
 import json
 import math
 import shlex
@@ -40,6 +41,7 @@ from roshan.checkpoints import (
 from roshan.config import Config, apply_overrides, dump_config, load_config
 from roshan.env.fly import FlyVectorEnv
 from roshan.episode import EPISODE_FIELDS, FAILURES, REASONS
+from roshan.io import OutputError, prepare_output, writing
 from roshan.runs.collect import PPOLearner, rollout_steps
 from roshan.runs.envs import make_env
 from roshan.runs.evaluate import evaluate_run, run_episodes
@@ -217,6 +219,10 @@ class Progress:
         return dict(self.__dict__)
 
 
+class TrainingStopped(ValueError):
+    """A training run stopped because something could not be written; the message says what and how to resume."""
+
+
 class Trainer:
     """One training run in ``run_dir`` (new or resumed)."""
 
@@ -232,8 +238,10 @@ class Trainer:
         self.agent = make_agent(cfg, torch_device())
         self.progress = Progress()
         self.episodes = EpisodeLog(window=tc.objective_window)
+        self.saved_update: int | None = None  # the update of the last latest.pt this process knows is whole
         if resume_state is not None:
             self._restore(resume_state)
+            self.saved_update = self.progress.updates
         elif tc.init_from:
             self._init_weights(tc.init_from)
         # A resumed run starts fresh episodes from a seed that depends on where it stopped.
@@ -305,31 +313,59 @@ class Trainer:
     # ------------------------------------------------------------------------------------------ run
 
     def run(self) -> Progress:
+        """Train until the budget is spent. A write that fails (full disk, read-only folder) stops the run with a
+        :class:`TrainingStopped` that says what could not be written and how to resume: the checkpoints are
+        written atomically, so the last good one is whole."""
         bar = self._bar()
         try:
             while not self.done():
-                t0 = time.perf_counter()
-                steps, metrics, rows = self.learner.iterate(self.generator)
-                self.episodes.add(rows)
-                dt = time.perf_counter() - t0
-                p = self.progress
-                p.updates, p.env_steps, p.seconds = p.updates + 1, p.env_steps + steps, p.seconds + dt
-                metrics["steps_per_s"] = steps / dt
-                metrics["updates_per_s"] = 1.0 / dt
-                self._log(metrics)
-                if self.cfg.train.eval_every and p.updates % self.cfg.train.eval_every == 0:
-                    self._periodic_eval()  # before _checkpoint, so that latest carries the new best_eval
-                self._checkpoint(metrics["rewards_raw"])
-                bar.update(steps if bar.total else 1)
-                bar.set_postfix(sps=f"{steps / dt:,.0f}", success=f"{self.episodes.success_so_far:.2f}",
-                                R=f"{metrics['rewards_raw']:+.3f}", refresh=False)
-                if self.on_update is not None:
-                    self.on_update({"updates": p.updates, "env_steps": p.env_steps,
-                                    "objective": self.episodes.objective, "reward": metrics["rewards_raw"]})
+                self._update(bar)
+            with writing("TensorBoard events", self.run_dir / "tb"):
+                self.writer.close()  # flushes the last events: a full disk can show only here
+        except OutputError as exc:
+            raise self._stopped(exc) from None
         finally:
             bar.close()
-            self.writer.close()
+            with contextlib.suppress(OSError):  # after a failure: the events written so far stay, nothing more can
+                self.writer.close()
         return self.progress
+
+    def _update(self, bar) -> None:
+        """One update: collect and learn, log, evaluate now and then, checkpoint."""
+        t0 = time.perf_counter()
+        steps, metrics, rows = self.learner.iterate(self.generator)
+        self.episodes.add(rows)
+        dt = time.perf_counter() - t0
+        p = self.progress
+        p.updates, p.env_steps, p.seconds = p.updates + 1, p.env_steps + steps, p.seconds + dt
+        metrics["steps_per_s"] = steps / dt
+        metrics["updates_per_s"] = 1.0 / dt
+        with writing("TensorBoard events", self.run_dir / "tb"):
+            self._log(metrics)
+        if self.cfg.train.eval_every and p.updates % self.cfg.train.eval_every == 0:
+            self._periodic_eval()  # before _checkpoint, so that latest carries the new best_eval
+        self._checkpoint(metrics["rewards_raw"])
+        bar.update(steps if bar.total else 1)
+        bar.set_postfix(sps=f"{steps / dt:,.0f}", success=f"{self.episodes.success_so_far:.2f}",
+                        R=f"{metrics['rewards_raw']:+.3f}", refresh=False)
+        if self.on_update is not None:
+            self.on_update({"updates": p.updates, "env_steps": p.env_steps,
+                            "objective": self.episodes.objective, "reward": metrics["rewards_raw"]})
+
+    def _stopped(self, exc: OutputError) -> "TrainingStopped":
+        if self.saved_update is None:
+            how = "no checkpoint was written yet: start the run again"
+        else:
+            how = (f"`roshan train --resume {self.run_dir}` continues from the last checkpoint "
+                   f"(update {self.saved_update})")
+        return TrainingStopped(f"{exc}; training stopped at update {self.progress.updates}; {how}")
+
+    def _save(self, state: dict, which: str) -> None:
+        path = checkpoint_path(self.run_dir, which)
+        with writing(f"checkpoint {which}", path):
+            save_checkpoint(state, path)
+        if which == "latest":
+            self.saved_update = state["progress"]["updates"]
 
     def _log(self, m: dict) -> None:
         w, step = self.writer, self.log_step
@@ -363,27 +399,28 @@ class Trainer:
             self.eval_env = make_env(self.cfg, min(tc.eval_envs, tc.eval_episodes), seed=seed, evaluation=True)
         episodes = run_episodes(self.eval_env, policy_fn(self.agent), tc.eval_episodes, seed=seed, progress_bar=False)
         summary = summarize(episodes)
-        for tag, value in evaluation_scalars(summary).items():
-            self.writer.add_scalar(tag, value, self.log_step)
+        with writing("TensorBoard events", self.run_dir / "tb"):  # the writer thread's failure shows at any add
+            for tag, value in evaluation_scalars(summary).items():
+                self.writer.add_scalar(tag, value, self.log_step)
         # The deterministic policy is what gets shipped, and in the collision setting it can be much better or worse
         # than the stochastic training objective says: keep the weights that evaluated best.
         if summary["success_rate"] >= self.progress.best_eval:
             self.progress.best_eval = summary["success_rate"]
-            save_checkpoint(self.state_dict(), checkpoint_path(self.run_dir, "best_eval"))
+            self._save(self.state_dict(), "best_eval")
 
     def _checkpoint(self, batch_reward: float) -> None:
         """latest always; best_reward / best_objective when the metric ties or improves (learning.md 9)."""
         p, state = self.progress, self.state_dict()
-        save_checkpoint(state, checkpoint_path(self.run_dir, "latest"))
+        self._save(state, "latest")
         if batch_reward == batch_reward and batch_reward >= p.best_reward:
             p.best_reward = batch_reward
-            save_checkpoint(self.state_dict(), checkpoint_path(self.run_dir, "best_reward"))
+            self._save(self.state_dict(), "best_reward")
         objective = self.episodes.objective
         if objective >= p.best_objective:
             p.best_objective = objective
-            save_checkpoint(self.state_dict(), checkpoint_path(self.run_dir, "best_objective"))
+            self._save(self.state_dict(), "best_objective")
         if state["progress"] != p.state_dict():  # the bests changed after latest was written
-            save_checkpoint(self.state_dict(), checkpoint_path(self.run_dir, "latest"))
+            self._save(self.state_dict(), "latest")
 
 
 # ------------------------------------------------------------------------------------------------ entry points
@@ -439,6 +476,7 @@ def train(cfg: Config, run_dir: Path, resume: bool = False, progress_bar: bool =
     ensure_taichi_for(cfg)
     if cfg.train.torch_threads:
         torch.set_num_threads(cfg.train.torch_threads)
+    prepare_output(Path(run_dir) / "checkpoints", "checkpoints")  # a read-only run folder fails before training
     with run_lock(run_dir):
         state = resume_state(run_dir, cfg) if resume else None
         trainer = Trainer(cfg, run_dir, state, progress_bar, on_update)

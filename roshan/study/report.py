@@ -169,7 +169,7 @@ def open_for_report(target: str, root: str | Path = "runs", name: str | None = N
     if not journal.is_file():
         raise StudyError(f"{target}: no study found (looked for {journal}); give a study name under --root, a study "
                          "folder, a journal file or a storage URL")
-    storage = open_storage(str(journal), heartbeat=None)
+    storage = open_storage(str(journal), heartbeat=None, repair=False)  # a report never rewrites a journal
     names = optuna.get_all_study_names(storage)
     name = name or (names[0] if len(names) == 1 else journal.parent.name)
     study, _ = load_study(storage, name)

@@ -61,7 +61,7 @@ def start_study(config_path: str | Path | None, space_path: str | Path | None, o
     if name is None:
         raise StudyError("--name NAME is needed to continue a study without CONFIG --space")
     url = storage or default_storage(root, name)
-    store = open_storage(url, heartbeat, max_retry)
+    store = open_storage(url, heartbeat, max_retry, repair=resume, echo=echo)
     prepare_study(store, name, recipe, resume, settings, trials, where=display_url(url))
     args = worker_args(workers, arch, threads, quiet, heartbeat, max_retry)
     study = run_study(url, name, root, workers, args, heartbeat, max_retry, echo)

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import json
 import os
+import shutil
 import socket
 import time
 import warnings
@@ -23,9 +25,11 @@ import optuna
 from optuna.exceptions import ExperimentalWarning, UpdateFinishedTrialError
 from optuna.storages import RDBStorage, RetryHeartbeatStaleTrialCallback
 from optuna.storages._heartbeat import BaseHeartbeat  # the storages' heartbeat interface (RDBStorage uses it)
-from optuna.storages.journal import JournalFileBackend, JournalStorage
+from optuna.storages.journal import JournalFileBackend, JournalFileSymlinkLock, JournalStorage
+from optuna.storages.journal._file import get_lock_file  # the lock Optuna's appends take
 from optuna.trial import FrozenTrial, TrialState
 
+from roshan.io import write_atomic, writing
 from roshan.study.errors import StudyError
 
 WORKER_ATTR = "roshan_worker"  # trial user attribute: {"host", "pid", "start"} of the process running it
@@ -165,12 +169,69 @@ def _with_postgres_driver(url: str) -> str:
     return url  # SQLAlchemy's ImportError below names the missing driver
 
 
-def open_storage(storage: str, heartbeat: int | None = 60, max_retry: int | None = 3):
+def _cut_line(path: Path) -> int | None:
+    """The number (1-based) of the journal's cut or unreadable last record, None if the journal is whole.
+    A damage on an earlier line is refused: dropping it would lose trials (and Optuna would misread the rest)."""
+    lines = path.read_bytes().split(b"\n")
+    tail = lines.pop()  # b"" when the file ends with a newline, as every whole journal does
+    for number, line in enumerate(lines, 1):
+        try:
+            json.loads(line)
+        except ValueError:
+            if number < len(lines) or tail:
+                raise StudyError(f"{path}: line {number} of the study journal is damaged (not a JSON record) and "
+                                 "is not its last line, so it cannot be dropped safely; restore the journal from a "
+                                 "backup, or mend that line by hand") from None
+            return number
+    return len(lines) + 1 if tail else None
+
+
+def check_journal(path: str | Path, repair: bool = False, echo: Callable[[str], None] | None = None) -> None:
+    """Find a journal whose last record was cut (a full disk or a killed write leaves one; once another record
+    is appended after it the journal is unreadable for good). With ``repair`` the original is copied to
+    ``<journal>.damaged-<time>`` and the cut line dropped; otherwise a StudyError names the journal and the fix."""
+    path = Path(path)
+    if not path.is_file():
+        return
+    if not repair:  # no lock: a report may read a journal in a folder it cannot write
+        number = _cut_line(path)
+        if number is not None:
+            _repair_journal(path, number, repair, echo)
+        return
+    # Under the journal's own lock, so that another worker's append in progress is not taken for a cut record.
+    with writing("the study journal's lock", path), get_lock_file(JournalFileSymlinkLock(str(path))):
+        number = _cut_line(path)
+        if number is not None:
+            _repair_journal(path, number, repair, echo)
+
+
+def _repair_journal(path: Path, number: int, repair: bool, echo: Callable[[str], None] | None) -> None:
+    if not repair:
+        raise StudyError(f"{path}: the last record (line {number}) of the study journal is cut (a full disk or a "
+                         f"killed write?); `roshan study run --resume --name {path.parent.name} --root "
+                         f"{path.parent.parent}` (with --storage {path} if it is not the default journal) drops it, "
+                         "keeping a copy of the original")
+    data = path.read_bytes()
+    whole = data[:data.rstrip(b"\n").rfind(b"\n") + 1]  # up to and including the last whole line's newline
+    copy_path = path.with_name(f"{path.name}.damaged-{time.strftime('%Y%m%d-%H%M%S')}")
+    with writing("a copy of the damaged study journal", copy_path):
+        shutil.copy2(path, copy_path)
+    with writing("the repaired study journal", path):
+        write_atomic(path, whole)
+    (echo or print)(f"{path}: its last record (line {number}) was cut; dropped it ({len(data) - len(whole)} bytes), "
+                    f"the original is kept as {copy_path}")
+
+
+def open_storage(storage: str, heartbeat: int | None = 60, max_retry: int | None = 3, repair: bool | None = None,
+                 echo: Callable[[str], None] | None = None):
     """A journal file (a path) or an RDB storage (a SQLAlchemy URL such as ``postgresql://user:pw@host/db``),
     with heartbeats every ``heartbeat`` s (None: off) and up to ``max_retry`` retries of stale trials.
+    A journal's cut last record is dropped (``repair=True``, told to ``echo``) or refused (``False``, see
+    :func:`check_journal`); None skips the check (a worker: the study's launcher checked it).
 
     Raises:
-        StudyError: the database cannot be reached, the driver is missing, or the file cannot be written.
+        StudyError: the database cannot be reached, the driver is missing, the file cannot be written, or the
+            journal is damaged.
     """
     quiet_optuna()
     with experimental():
@@ -178,6 +239,8 @@ def open_storage(storage: str, heartbeat: int | None = 60, max_retry: int | None
     grace = 5 * heartbeat if heartbeat else None
     if not is_url(storage):
         path = Path(storage)
+        if repair is not None:
+            check_journal(path, repair, echo)
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             if heartbeat:

@@ -17,7 +17,7 @@ import numpy as np
 from roshan.config import Config, ConfigError, FlyConfig, replace, to_dict
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import POLICIES, policy_actions
-from roshan.io import write_gif
+from roshan.io import prepare_output, write_atomic, write_gif, writing
 from roshan.kernels.fire import FireSim
 from roshan.kernels.render import FrameRenderer, drone_overlay
 from roshan.maps import load_map
@@ -232,17 +232,28 @@ def _check_steps(steps: int, every: int) -> None:
         raise ValueError(f"steps must be >= 0 and every >= 1 (got steps={steps}, every={every})")
 
 
+def prepare_outputs(frames_dir: Path | None, gif: Path | None, json_path: Path | None) -> None:
+    """Create the output folders and check they can be written before anything is simulated: a run of hours
+    must not end by losing its results to a missing or read-only folder."""
+    if frames_dir is not None or gif is not None:
+        _frames_dir(frames_dir, gif)
+    if gif is not None:
+        prepare_output(gif, "the GIF", is_dir=False)
+    if json_path is not None:
+        prepare_output(json_path, "the JSON series", is_dir=False)
+
+
 def _frames_dir(frames_dir: Path | None, gif: Path | None) -> Path:
     frames_dir = Path(frames_dir) if frames_dir is not None else Path(gif).with_suffix("").parent / "frames"
-    frames_dir.mkdir(parents=True, exist_ok=True)
-    return frames_dir
+    return prepare_output(frames_dir, "frames")
 
 
 def _finish_frames(renderer, result: SimulationResult, gif: Path | None) -> None:
     if renderer is not None:
         renderer.close()
         if gif is not None:
-            result.gif = write_gif(result.frames, Path(gif))
+            with writing("the GIF", gif):
+                result.gif = write_gif(result.frames, Path(gif))
 
 
 def _timing(steps: int, envs: int, t_reset: float, step_seconds: float, memory: int, t0: float) -> dict:
@@ -265,7 +276,8 @@ def write_json(cfg: Config, result: SimulationResult, path: Path) -> None:
     if result.drones is not None:
         data["config"]["drones"]["num_drones"] = result.drones["drones"]
         data["drones"] = result.drones
-    Path(path).write_text(json.dumps(data, indent=1))
+    with writing("the JSON series", path):
+        write_atomic(path, json.dumps(data, indent=1).encode())
 
 
 def summary_lines(result: SimulationResult) -> list[str]:
