@@ -165,3 +165,11 @@ class PPOLearner:
         metrics = self.agent.update(rollout, generator)
         rows = ended_rows(self.collector.ended, self.collector.stats)
         return self.steps * self.env.num_envs, metrics, rows
+
+
+def next_observation(obs: dict, info: dict, ended: torch.Tensor) -> dict[str, torch.Tensor]:
+    """Per-drone next observations (E*N, ...): the env's ``final_obs`` where the episode ended this step."""
+    out = {}
+    for (k, v), f in zip(flatten_drones(obs).items(), flatten_drones(info["final_obs"]).values(), strict=True):
+        out[k] = torch.where(ended.view(-1, *[1] * (v.dim() - 1)), f, v)
+    return out

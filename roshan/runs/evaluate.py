@@ -22,6 +22,7 @@ from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import straight_to_goal
 from roshan.episode import EPISODE_FIELDS, REASONS
 from roshan.io import prepare_output, write_gif, writing
+from roshan.runs.collect import next_observation
 from roshan.runs.envs import make_env
 from roshan.runs.report.files import write_episodes_csv, write_summary_json
 from roshan.runs.report.plots import plot_comparison, plot_episodes, plot_learning_curves
@@ -232,9 +233,7 @@ def save_buffer(target: str | Path, transitions: int, path: Path, seed: int = 0,
         actions = act(o)
         obs, rewards, terms, truncs, info = env.step(actions.view(E, N, 2))
         ended = (terms | truncs).repeat_interleave(N)
-        nxt = {k: torch.where(ended.view(-1, *[1] * (v.dim() - 1)), f, v)
-               for (k, v), f in zip(flatten_drones(obs).items(), flatten_drones(info["final_obs"]).values(),
-                                    strict=True)}
+        nxt = next_observation(obs, info, ended)
         take = min(E * N, transitions - len(buf))
         not_done = (~terms).repeat_interleave(N).float()
         buf.add({k: v[:take] for k, v in o.items()}, actions[:take], rewards.flatten()[:take], not_done[:take],

@@ -42,7 +42,7 @@ from roshan.config import Config, apply_overrides, dump_config, load_config
 from roshan.env.fly import FlyVectorEnv
 from roshan.episode import EPISODE_FIELDS, FAILURES, REASONS
 from roshan.io import OutputError, prepare_output, writing
-from roshan.runs.collect import PPOLearner, rollout_steps
+from roshan.runs.collect import PPOLearner, next_observation, rollout_steps
 from roshan.runs.envs import make_env
 from roshan.runs.evaluate import evaluate_run, run_episodes
 from roshan.runs.report.stats import evaluation_scalars, summarize
@@ -96,14 +96,6 @@ class EpisodeLog:
 
     def load_state_dict(self, s: dict) -> None:
         self.window, self.episodes, self.recent = s["window"], s["episodes"], collections.deque(s["recent"])
-
-
-def next_observation(obs: dict, info: dict, ended: torch.Tensor) -> dict[str, torch.Tensor]:
-    """Per-drone next observations (E*N, ...): the env's ``final_obs`` where the episode ended this step."""
-    out = {}
-    for (k, v), f in zip(flatten_drones(obs).items(), flatten_drones(info["final_obs"]).values(), strict=True):
-        out[k] = torch.where(ended.view(-1, *[1] * (v.dim() - 1)), f, v)
-    return out
 
 
 class OffPolicyCollector:
