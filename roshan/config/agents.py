@@ -104,6 +104,9 @@ class PlannerConfig(Section):
     eval_fires: str = choice("detected", ("true", "detected"), doc="candidates in evaluation")
     time_limit: str = choice("newest", ("newest", "thesis"))  # T_max formulas of agents.md 5
     burnout: float = num(0.30, 0.0, 1.0, doc="burned-out fraction that fails the episode")
+    greedy_home: str = choice("original", ("original", "fixed"),
+                              doc="greedy heuristic: original = a drone whose fire is on the groundstation cell "
+                                  "re-takes it every step and never drops (agents.md 10.2); fixed = it drops")
     max_candidates: int = num(0, 0, doc="candidate list length K (groundstation included); 0 = every cell + 1")
     network: str = choice("thesis", ("thesis", "pointer"), doc="the planner network: learning.md 3.1 (thesis) or "
                                                               "3.2 (pointer, newest)")

@@ -53,13 +53,14 @@ class WindConfig(Section):
 
 @dataclass(frozen=True)
 class IgnitionConfig(Section):
-    """The initial fire generator (firespin.md 11, newest code)."""
+    """The initial fire generator (firespin.md 11): the newest code's, or the thesis era's with ``reseed: false``."""
 
     fire_percentage: float = num(0.015, 0.0, 1.0, doc="fraction of all cells to ignite")
     clusters: int = num(2, 1, doc="number of clusters (or rings)")
     spread_prob: float = num(0.5, 0.0, 1.0, doc="base probability that a cluster grows into a neighbour")
     noise: float = num(1.0, 0.0, 2.0, doc="amplitude of the perturbation of spread_prob")
     pattern: str = choice("cluster", ("cluster", "scattered", "ring", "random"))
+    reseed: bool = True  # newest code: re-seed a trapped cluster until it has its share; false = thesis era (a maximum)
 
 
 @dataclass(frozen=True)

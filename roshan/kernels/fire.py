@@ -164,6 +164,7 @@ class FireSim:
         self.num_fires = int(np.float32(self.num_cells) * np.float32(ig.fire_percentage))  # float product, truncated
         self.num_clusters = ig.clusters
         self.pattern = PATTERNS.index(ig.pattern)
+        self.reseed = ig.reseed
 
     def _alloc_class_table(self, land: LandCoverMap) -> None:
         n = len(CLASSES)

@@ -1,4 +1,8 @@
-"""Initial fire generator (firespin.md 11, newest code): cluster, scattered, ring and random patterns.
+"""Initial fire generator (firespin.md 11): cluster, scattered, ring and random patterns.
+
+The newest code re-seeds a cluster whose growth got trapped until it has its share of the fires, so a 35 %
+setting lights 35 % of the cells; the thesis-era code (``ignition.reseed: false``) does not, so there the
+percentage is a maximum (each cluster is a self-avoiding random walk that stops when trapped).
 
 Runs serially inside one env of the reset kernel, drawing from that env's counter-based stream, so the
 layout depends only on (seed, env, episode). Functions take the simulator as ``ti.template()`` and use its
@@ -117,7 +121,7 @@ def _shuffle_candidates(sim: ti.template(), e, n):
 
 @ti.func
 def _grow_cluster(sim: ti.template(), e, start, size, tag):
-    """Breadth-first growth with probabilistic spread, one-cell tendrils and re-seeding (firespin.md 11)."""
+    """Breadth-first growth with probabilistic spread, one-cell tendrils and (newest code) re-seeding."""
     head = 0
     tail = _push(sim, e, 0, start, tag, 0)
     first_lit = sim.burning_count(e)  # this cluster's fires are burning[first_lit : first_lit + ignited]
@@ -140,7 +144,7 @@ def _grow_cluster(sim: ti.template(), e, start, size, tag):
                 p = sim.spread_prob + (_uniform(sim, e) - 0.5) * sim.spread_noise
                 if r < p:
                     tail = _push(sim, e, tail, sim.cand[e, k], tag, USED)
-            if head == tail and ignited < size and failures < MAX_RESEED_FAILURES:
+            if ti.static(sim.reseed) and head == tail and ignited < size and failures < MAX_RESEED_FAILURES:
                 pushed = 0
                 if ignited > 0:
                     res = _reseed_from_frontier(sim, e, tail, tag, first_lit, ignited)

@@ -73,6 +73,7 @@ class PlannerKernels(EpisodeKernels):
         t_max: low-level step limit of an episode.
         coef: :class:`roshan.kernels.rewards.PlannerCoefficients`.
         greedy: the drones follow the heuristic state machine (agents.md 10.2) instead of planner goals.
+        greedy_home_fixed: the heuristic with the groundstation fix (:class:`GoalRules`, ``wake_reserved``).
         move_explorers: step the explorers (evaluation); in planner training they stay at the groundstation.
         detected: the candidates are the fire map's cells (fires some drone has seen) instead of all burning
             cells (centralised training).
@@ -82,7 +83,7 @@ class PlannerKernels(EpisodeKernels):
     """
 
     def __init__(self, fire: FireSim, drones: DroneSim, explorers: DroneSim, maps: ExploreMaps, *, interval: int,
-                 t_max: int, coef, greedy: bool, move_explorers: bool, detected: bool, burnout: float,
+                 t_max: int, coef, greedy: bool, greedy_home_fixed: bool, move_explorers: bool, detected: bool, burnout: float,
                  max_candidates: int, fly_frames: int, explore_frames: int):
         super().__init__(fire, t_max)
         self.drones, self.explorers, self.maps = drones, explorers, maps
@@ -100,7 +101,8 @@ class PlannerKernels(EpisodeKernels):
         # The low level runs the FlyAgent goal rules: planner drones drop water on every burning cell they fly
         # over (agents.md 7) and keep the planner's goals; the heuristic's drones pick known fires themselves.
         if greedy:
-            self.rules = GoalRules(drones, KnownFires(fire, maps), mode=EXTINGUISH, wake_idle=True, sensor=maps)
+            self.rules = GoalRules(drones, KnownFires(fire, maps), mode=EXTINGUISH, wake_idle=True,
+                                   wake_reserved=not greedy_home_fixed, sensor=maps)
         else:
             self.rules = GoalRules(drones, BurningCells(fire), mode=DROP_ANYWHERE, sensor=maps)
         E, N = fire.num_envs, drones.num_drones

@@ -105,7 +105,8 @@ def take_planner_sims(land: LandCoverMap, cfg: Config, pc: PlannerConfig, num_en
         fires = pc.eval_fires if evaluation else pc.train_fires
         kernels = PlannerKernels(
             fire, drones, explorers, maps, interval=pc.interval, t_max=t_max,
-            coef=PlannerCoefficients.resolve(pc.rewards), greedy=greedy, move_explorers=evaluation or greedy,
+            coef=PlannerCoefficients.resolve(pc.rewards), greedy=greedy,
+            greedy_home_fixed=pc.greedy_home == "fixed", move_explorers=evaluation or greedy,
             detected=fires == "detected" or greedy, burnout=pc.burnout, max_candidates=max_candidates,
             fly_frames=fly_frames, explore_frames=explore_frames)
         return PlannerSims(fire, drones, explorers, maps, kernels, EnvZeroFrames(drones), t_max, max_candidates)

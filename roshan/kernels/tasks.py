@@ -136,14 +136,19 @@ class GoalRules:
             the fix clears it every step, so Extinguish pays on the step water hits a fire only).
         wake_idle: a drone heading for the groundstation takes the nearest candidate as soon as there is one
             (the heuristic; a FlyAgent retries only when it arrives).
+        wake_reserved: with ``wake_idle``, also a drone whose goal is a fire on the groundstation's own cell (the
+            original: its goal's centre equals the groundstation's, so it re-takes that fire every step and never
+            reaches the drop; the heuristic times out whenever that cell burns). False is the fix: only a drone
+            without a reserved fire (``goal_cell < 0``) is idle.
         sensor: an object whose ``observe_drone(e, drones, d)`` runs right after the move (the planner's fire
             map), or None.
     """
 
     def __init__(self, drones, candidates, *, mode: int, water_policy: bool = False, sticky: bool = False,
-                 wake_idle: bool = False, sensor=None):
+                 wake_idle: bool = False, wake_reserved: bool = True, sensor=None):
         self.drones, self.candidates, self.mode = drones, candidates, mode
         self.water_policy, self.sticky, self.wake_idle = water_policy, sticky, wake_idle
+        self.wake_reserved = wake_reserved
         self.sensor = sensor
         self.has_sensor = sensor is not None  # read in ti.static (no "is" in Taichi scope)
 
@@ -178,7 +183,10 @@ class GoalRules:
                     self.retarget(e, d)
             waking = 0
             if ti.static(self.wake_idle):
-                waking = ti.cast(dr.heads_home(e, d) != 0 and self.candidates.any(e) != 0, ti.i32)
+                idle = dr.heads_home(e, d)
+                if ti.static(not self.wake_reserved):
+                    idle = ti.cast(idle != 0 and dr.goal_cell[e, d] < 0, ti.i32)
+                waking = ti.cast(idle != 0 and self.candidates.any(e) != 0, ti.i32)
             if waking != 0:
                 self.retarget(e, d)
             elif going_home == 0 and dr.at_goal(e, d) != 0:

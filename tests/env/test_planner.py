@@ -19,6 +19,7 @@ from roshan.config import (
 )
 from roshan.env.planner import PlannerVectorEnv
 from roshan.kernels.planner import planner_time_limit
+from roshan.maps import BURNING
 from roshan.kernels.rewards import PlannerCoefficients, planner_outcome_reward, planner_step_reward
 
 MODEL = str(Path(__file__).resolve().parents[2] / "models" / "fly_simple")
@@ -195,3 +196,24 @@ def test_greedy_heuristic_sends_drones_to_known_fires_without_sharing_one():
             assert fire_map[e, c // env.fire.cols, c % env.fire.cols] == 1  # a known fire
         if env.maps.known_fires.to_numpy()[e] >= 4:
             assert len(held) == 4  # nobody waits at the groundstation while free fires are known
+
+
+@pytest.mark.parametrize("home", ["original", "fixed"])
+def test_greedy_fire_on_the_groundstation_cell_is_put_out_only_with_the_fix(home):
+    # agents.md 10.2: the fire's centre equals the groundstation's, so the original's "wait at the groundstation"
+    # branch re-takes that fire every step and the drop is never reached; the fix lets the drone drop.
+    cfg = Config(ignition=IgnitionConfig(fire_percentage=0.0), drones=DroneConfig(num_drones=4),
+                 wind=WindConfig(speed=0.0))
+    pc = PlannerConfig(interval=1, fly_model=MODEL, explorer_model=MODEL, num_explorers=2, greedy_home=home)
+    env = PlannerVectorEnv(2, cfg, pc, evaluation=True, controller="greedy", seed=3)
+    env.reset(seed=3)
+    gs = env.drones.groundstation.to_numpy()
+    cells = gs[:, 0] * env.fire.cols + gs[:, 1]
+    mask = np.zeros((2, env.fire.num_cells), np.int32)
+    mask[[0, 1], cells] = 1
+    env.fire.ignite_cells(mask)
+    for _ in range(80):
+        env.step(torch.zeros(2, 4, dtype=torch.long))
+    burning = [env.fire.state(e)[tuple(gs[e])] == BURNING for e in range(2)]
+    assert burning == ([True, True] if home == "original" else [False, False])
+    env.close()

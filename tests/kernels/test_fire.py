@@ -165,6 +165,19 @@ def test_generator_lights_the_requested_number_of_fires(pattern):
     assert sim.stats()["initial_fires"].tolist() == [expected] * 6
 
 
+def test_thesis_era_generator_lights_at_most_the_requested_fires():
+    # firespin.md 11: without re-seeding each cluster is a self-avoiding walk that stops when trapped. A port of the
+    # thesis-era C++ generator lights a median of ~180-200 of the 441 fires (35 %, 2 clusters, 35x36_Woods).
+    land = load_map("35x36_Woods")
+    thesis = FireSim(land, ignition=IgnitionConfig(fire_percentage=0.35, reseed=False), num_envs=400, seed=11)
+    thesis.reset()
+    lit = thesis.stats()["initial_fires"]
+    assert lit.max() <= 441 and 150 <= np.median(lit) <= 230 and 60 <= lit.std() <= 100
+    newest = FireSim(land, ignition=IgnitionConfig(fire_percentage=0.35), num_envs=400, seed=11)
+    newest.reset()
+    assert newest.stats()["initial_fires"].tolist() == [441] * 400
+
+
 def test_clusters_are_compact():
     land = load_map("54x71_Woods")
     sim = FireSim(land, ignition=IgnitionConfig(fire_percentage=0.05, clusters=1), num_envs=4, seed=3)
