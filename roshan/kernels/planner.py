@@ -83,8 +83,8 @@ class PlannerKernels(EpisodeKernels):
     """
 
     def __init__(self, fire: FireSim, drones: DroneSim, explorers: DroneSim, maps: ExploreMaps, *, interval: int,
-                 t_max: int, coef, greedy: bool, greedy_home_fixed: bool, move_explorers: bool, detected: bool, burnout: float,
-                 max_candidates: int, fly_frames: int, explore_frames: int):
+                 t_max: int, coef, greedy: bool, greedy_home_fixed: bool, move_explorers: bool, detected: bool,
+                 burnout: float, max_candidates: int, fly_frames: int, explore_frames: int):
         super().__init__(fire, t_max)
         self.drones, self.explorers, self.maps = drones, explorers, maps
         self.interval, self.coef = interval, coef

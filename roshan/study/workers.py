@@ -47,6 +47,10 @@ def _trial_line(t: FrozenTrial, recipe: Recipe, retried: bool) -> str:
 class Launcher:
     """Keeps ``workers`` worker processes (one trial each) running while the study has trials to start."""
 
+    def continue_hint(self) -> str:
+        """The command that continues after an interruption or a crash."""
+        return f"roshan study run --resume --name {self.name} --root {self.root}"
+
     def __init__(self, storage_url: str, name: str, root: str | Path, workers: int, worker_args: list[str],
                  echo: Callable[[str], None] = print, poll: float = 1.0):
         self.storage_url, self.name, self.root, self.workers = storage_url, name, str(root), workers
@@ -106,11 +110,11 @@ class Launcher:
         except KeyboardInterrupt:
             self.stop()
             raise StudyError(f"interrupted; the running trials were failed and queued again. Continue with "
-                             f"`roshan study --resume --name {self.name}`") from None
+                             f"`{self.continue_hint()}`") from None
         self.report_finished(study, recipe)
         if self.crashed:
-            raise StudyError(f"{self.crashed} (see above); the study is intact: fix the cause and continue it "
-                             f"with --resume")
+            raise StudyError(f"{self.crashed} (see above); nothing finished is lost: fix the cause and continue "
+                             f"with `{self.continue_hint()}`")
 
     def stop(self) -> None:
         """After Ctrl-C: the workers got SIGINT from the terminal too and queue their trials again; wait for them.

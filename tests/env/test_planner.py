@@ -19,8 +19,8 @@ from roshan.config import (
 )
 from roshan.env.planner import PlannerVectorEnv
 from roshan.kernels.planner import planner_time_limit
-from roshan.maps import BURNING
 from roshan.kernels.rewards import PlannerCoefficients, planner_outcome_reward, planner_step_reward
+from roshan.maps import BURNING
 
 MODEL = str(Path(__file__).resolve().parents[2] / "models" / "fly_simple")
 FIRES = IgnitionConfig(fire_percentage=0.05, clusters=2)
