@@ -342,6 +342,92 @@ def study_report(target, name, root, top_k, out_dir, no_plots):
         click.echo(f"{plot}: {where}")
 
 
+# ------------------------------------------------------------------------------------------------ experiment
+
+
+@main.group()
+def experiment():
+    """Conditions x seeds from a spec (configs/experiments/): `experiment run SPEC`, `experiment report SPEC`."""
+
+
+EXPERIMENT_STORAGE = click.option(
+    "--storage", default=None, help="SQLAlchemy URL (postgresql://user:password@host/db) shared by machines, or a "
+                                    "journal file (default: ROOT/NAME/experiment.journal).")
+BUDGET = click.option("--budget", type=click.Choice(["local", "thesis"]), default="local", show_default=True,
+                      help="The spec's budgets for this machine, or the thesis's own (each condition's thesis_set; "
+                           "a separate experiment, NAME-thesis).")
+
+
+@experiment.command("run")
+@click.argument("spec_path", type=click.Path(dir_okay=False))
+@BUDGET
+@EXPERIMENT_STORAGE
+@click.option("--root", default="runs", show_default=True, type=click.Path(file_okay=False),
+              help="Runs train in ROOT/NAME/<condition>/seed_<s>/.")
+@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Worker processes on this machine (one run each at a time).")
+@click.option("--max-retry", type=click.IntRange(min=0), default=3, show_default=True,
+              help="Retries of a run whose worker died (each continues from its latest checkpoint).")
+@click.option("--heartbeat", type=click.IntRange(min=1), default=60, show_default=True,
+              help="Seconds between a running run's heartbeats; stale after 5 missed ones.")
+@click.option("--worker", is_flag=True, hidden=True)
+@click.option("--slot", type=click.IntRange(min=0), default=0, hidden=True)
+@ARCH
+@THREADS
+def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbeat, worker, slot, arch, threads):
+    """Train and evaluate every (condition, seed) of SPEC; run it again to continue after a crash (finished runs
+    are kept, a killed one continues from its checkpoint); machines sharing --storage split the runs."""
+    from roshan.experiment.runner import default_storage, run_experiment, run_worker
+    from roshan.experiment.spec import load_spec
+    from roshan.study.trial import local_values
+
+    try:
+        spec = load_spec(spec_path, budget)
+        extra = tuple(f"{k}={v}" for k, v in local_values(arch, threads).items())
+        if worker:
+            url = storage or default_storage(root, spec.name)
+            sys.exit(run_worker(spec, url, root, heartbeat=heartbeat, max_retry=max_retry, extra=extra))
+        args = (["--arch", arch] if arch else []) + (["--threads", str(threads)] if threads else [])
+        run_experiment(spec, root, storage, workers, args, heartbeat, max_retry, echo=click.echo)
+    except (ConfigError, MapError, ValueError, OSError) as exc:
+        _fail(exc)
+    click.echo(f"report: roshan experiment report {spec_path}" + (f" --budget {budget}" if budget != "local" else "")
+               + (f" --storage {storage}" if storage else "") + (f" --root {root}" if root != "runs" else ""))
+
+
+@experiment.command("report")
+@click.argument("spec_path", type=click.Path(dir_okay=False))
+@BUDGET
+@EXPERIMENT_STORAGE
+@click.option("--root", default="runs", show_default=True, type=click.Path(file_okay=False))
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="Report folder (default: ROOT/NAME/report).")
+def experiment_report(spec_path, budget, storage, root, out_dir):
+    """Thesis-style tables of SPEC's finished runs (mean ± std (median) over seeds beside the thesis's values),
+    per-seed rows (CSV, JSON) and a plot."""
+    from roshan.experiment.report import markdown, write_report
+    from roshan.experiment.runner import default_storage, experiment_dir, load_experiment, progress
+    from roshan.experiment.spec import load_spec
+    from roshan.study.storage import open_storage
+
+    try:
+        spec = load_spec(spec_path, budget)
+        url = storage or default_storage(root, spec.name)
+        if not storage and not Path(url).is_file():
+            raise FileNotFoundError(f"{url}: no experiment journal; run `roshan experiment run {spec_path}` first "
+                                    "(or give --storage / --root)")
+        study = load_experiment(open_storage(url, heartbeat=None, repair=False), spec.name)
+        out = Path(out_dir) if out_dir else experiment_dir(root, spec.name) / "report"
+        rows = write_report(spec, study, out)
+    except (ConfigError, ValueError, OSError) as exc:
+        _fail(exc)
+    p = progress(study)
+    click.echo(f"experiment {spec.name}: {p['done']}/{len(spec.runs())} runs done, {p['running']} running, "
+               f"{p['waiting']} waiting" + (f", {p['failed']} failed" if p["failed"] else ""))
+    click.echo(markdown(spec, rows))
+    click.echo(f"wrote {out}/report.md, per_seed.csv, summary.json, runs/, success.png")
+
+
 # ------------------------------------------------------------------------------------------------ bench
 
 

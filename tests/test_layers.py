@@ -19,7 +19,7 @@ PACKAGE = "roshan"
 
 BASE = ("roshan.config", "roshan.maps", "roshan.runtime", "roshan.episode", "roshan.checkpoints", "roshan.io",
         "roshan.allocator", "roshan.ggui")
-UPPER = ("roshan.runs", "roshan.study", "roshan.tools", "roshan.cli")
+UPPER = ("roshan.runs", "roshan.study", "roshan.experiment", "roshan.tools", "roshan.cli")
 # (modules under these prefixes, may not import these prefixes, except these modules)
 RULES = (
     (("roshan.kernels",), ("roshan.env", "roshan.algos", *UPPER), ()),

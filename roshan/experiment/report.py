@@ -1,0 +1,179 @@
+"""The experiment's tables, the way the thesis reports them: per condition, each rate as mean ± std (median) over
+seeds (every seed's rate taken over its evaluation episodes), beside the thesis's row; TTE as mean ± std (median)
+over all evaluation episodes of all seeds (the thesis's planner tables); one row per seed too.
+
+The std is the population std over seeds (numpy's default, ddof = 0): the thesis's figures imply it (E1 PPO's
+boundary exits, 0.20 ± 0.40 over 10 seeds of 200 episodes, fit only two seeds at 1 % and ddof = 0).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from roshan.experiment.runner import RESULT_ATTR, run_key
+from roshan.experiment.spec import Condition, Reference, Spec
+from roshan.io import write_atomic, writing
+
+RATES = ("success", "collision", "boundary", "timeout", "burnout")
+
+
+def seed_stats(values) -> Reference:
+    """mean ± std (median) over seeds; std with ddof = 0 (see the module docstring)."""
+    v = np.asarray(values, dtype=float)
+    return Reference(float(v.mean()), float(v.std()), float(np.median(v)))
+
+
+def rate(result: dict, metric: str) -> float:
+    """A run's rate in percent: success, or the share of episodes that failed by ``metric``."""
+    if metric == "success":
+        return 100.0 * result["success_rate"]
+    return 100.0 * result["failure_rates"].get(metric, 0.0)
+
+
+def results_of(study) -> dict[str, dict]:
+    """run key -> result of every finished run."""
+    return {run_key(t): t.user_attrs[RESULT_ATTR] for t in study.get_trials(deepcopy=False)
+            if t.state.is_finished() and RESULT_ATTR in t.user_attrs}
+
+
+def condition_rows(spec: Spec, results: dict[str, dict]) -> list[dict]:
+    """One aggregate per condition: seeds done of planned, each rate's seed statistics, TTE over episodes."""
+    rows = []
+    for cond in spec.conditions:
+        done = [results[r.key] for r in spec.runs((cond.name,)) if r.key in results]
+        row = {"condition": cond.name, "seeds": len(done), "planned": len(cond.seeds), "thesis": cond.thesis}
+        if done:
+            for m in RATES:
+                row[m] = seed_stats([rate(r, m) for r in done])
+            row["tte"] = seed_stats([t for r in done for t in r["tte_episodes"]]) if any(
+                r["tte_episodes"] for r in done) else None
+            row["minutes"] = float(sum(r.get("minutes", 0.0) for r in done))
+            row["episodes"] = int(sum(r["episodes"] for r in done))
+        rows.append(row)
+    return rows
+
+
+def _cell(ref: Reference | None, digits: int = 1) -> str:
+    if ref is None:
+        return "-"
+    return f"{ref.mean:.{digits}f} ± {ref.std:.{digits}f} ({ref.median:.{digits}f})"
+
+
+def _shown_rates(cond: Condition, row: dict) -> list[str]:
+    """The rates worth a column for this condition: measured non-zero, or reported by the thesis."""
+    return [m for m in RATES if m == "success" or m in cond.thesis or (m in row and row[m].mean > 0)]
+
+
+def markdown(spec: Spec, rows: list[dict]) -> str:
+    """A table per condition group: ours beside the thesis's, mean ± std (median)."""
+    out = [f"Experiment `{spec.name}` ({spec.path}, budget {spec.budget}). Rates in % of evaluation episodes, "
+           "mean ± std (median) over seeds (std: ddof = 0); TTE in low-level steps over all evaluation episodes of "
+           "all seeds.", "",
+           "| condition | seeds | metric | ours | thesis |", "|---|---|---|---|---|"]
+    for cond, row in zip(spec.conditions, rows, strict=True):
+        seeds = f"{row['seeds']}/{row['planned']}"
+        if not row["seeds"]:
+            out.append(f"| {cond.name} | {seeds} | - | not run yet | - |")
+            continue
+        metrics = _shown_rates(cond, row) + (["tte"] if row.get("tte") is not None else [])
+        for i, m in enumerate(metrics):
+            ours = _cell(row.get(m), 0 if m == "tte" else 1)
+            ref = str(cond.thesis[m]) if m in cond.thesis else "-"
+            label = "TTE (steps)" if m == "tte" else f"{m} %"
+            out.append(f"| {cond.name if i == 0 else ''} | {seeds if i == 0 else ''} | {label} | {ours} | {ref} |")
+    return "\n".join(out) + "\n"
+
+
+def per_seed_csv(spec: Spec, results: dict[str, dict]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["condition", "seed", "episodes", *[f"{m}_pct" for m in RATES], "tte_mean", "tte_median",
+                "updates", "env_steps", "train_minutes", "minutes", "host"])
+    for run in spec.runs():
+        r = results.get(run.key)
+        if r is None:
+            continue
+        tte = r["tte_episodes"]
+        train = r.get("train", {})
+        w.writerow([run.condition.name, run.seed, r["episodes"], *[f"{rate(r, m):.2f}" for m in RATES],
+                    f"{np.mean(tte):.1f}" if tte else "", f"{np.median(tte):.1f}" if tte else "",
+                    train.get("updates", ""), train.get("env_steps", ""),
+                    f"{train['seconds'] / 60:.2f}" if "seconds" in train else "", f"{r.get('minutes', 0):.2f}",
+                    r.get("host", "")])
+    return buf.getvalue()
+
+
+def _plain(row: dict) -> dict:
+    out = {}
+    for k, v in row.items():
+        if isinstance(v, Reference):
+            out[k] = vars(v)
+        elif isinstance(v, dict):
+            out[k] = {m: vars(ref) for m, ref in v.items()}
+        else:
+            out[k] = v
+    return out
+
+
+def plot(spec: Spec, rows: list[dict], path: Path) -> None:
+    """Success per condition: every seed as a dot, ours' mean ± std as a bar, the thesis's as a black error bar."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = [c.name for c in spec.conditions]
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.8 * len(names) + 2), 4.2))
+    for i, (cond, row) in enumerate(zip(spec.conditions, rows, strict=True)):
+        if row["seeds"]:
+            s = row["success"]
+            ax.bar(i - 0.18, s.mean, 0.36, yerr=s.std, color="tab:blue", alpha=0.7, capsize=3,
+                   label="ours: mean ± std over seeds" if i == 0 else None)
+            pts = row.get("_points", [])
+            ax.plot([i - 0.18] * len(pts), pts, "k.", ms=4)
+        ref = cond.thesis.get("success")
+        if ref is not None:
+            ax.errorbar(i + 0.18, ref.mean, yerr=0 if ref.std is None else ref.std, fmt="s", color="tab:orange",
+                        capsize=3, label="thesis" if "thesis" not in ax.get_legend_handles_labels()[1] else None)
+    ax.set_xticks(range(len(names)), names, rotation=30, ha="right")
+    ax.set_ylabel("success (% of evaluation episodes)")
+    ax.set_ylim(0, 105)
+    ax.set_title(f"{spec.name}: success per condition (dots: seeds)")
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(loc="lower left", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_report(spec: Spec, study, out_dir: str | Path) -> list[dict]:
+    """report.md, per_seed.csv, summary.json, runs/<condition>/seed_<s>.json and success.png in ``out_dir``."""
+    out = Path(out_dir)
+    results = results_of(study)
+    rows = condition_rows(spec, results)
+    for cond, row in zip(spec.conditions, rows, strict=True):
+        row["_points"] = [rate(results[r.key], "success") for r in spec.runs((cond.name,)) if r.key in results]
+    with writing("the experiment report", out):
+        out.mkdir(parents=True, exist_ok=True)
+        write_atomic(out / "report.md", markdown(spec, rows).encode())
+        write_atomic(out / "per_seed.csv", per_seed_csv(spec, results).encode())
+        summary = [_plain({k: v for k, v in r.items() if not k.startswith("_")}) for r in rows]
+        write_atomic(out / "summary.json", (json.dumps(summary, indent=2, default=_nan_free) + "\n").encode())
+        for key, r in results.items():
+            path = out / "runs" / f"{key}.json"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_atomic(path, (json.dumps(r, indent=2) + "\n").encode())
+        plot(spec, rows, out / "success.png")
+    return rows
+
+
+def _nan_free(x):
+    if isinstance(x, float) and math.isnan(x):
+        return None
+    return str(x)

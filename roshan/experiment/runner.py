@@ -1,0 +1,350 @@
+"""Running an experiment: every (condition, seed) of a spec is a trial with one fixed parameter (``run``, its key)
+in an Optuna study, in the same storages as ``roshan study`` (a journal file by default, PostgreSQL to spread the
+runs over machines).
+
+- Creating the experiment enqueues one WAITING trial per run. A worker process claims one with ``study.ask()``,
+  which hands a waiting trial to exactly one caller (the storage's state change from WAITING to RUNNING is
+  atomic), trains and evaluates it, and tells the trial COMPLETE with its results as user attributes.
+- A worker that dies (killed, machine lost) leaves its trial RUNNING; it is found stale as in a study (its process
+  is gone, or its heartbeat is older than the grace period), failed, and queued again with the same ``run``. The
+  retry continues the training from the run folder's latest checkpoint; finished runs are never redone.
+- A worker runs one run and exits (Taichi fields are not freed inside a process); ``--workers W`` keeps W busy.
+
+Run folders: ``<root>/<experiment>/<condition>/seed_<s>/`` on the machine that ran them, each with its
+``result.json``; the results themselves live in the storage, so ``roshan experiment report`` works anywhere.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+
+import optuna
+import torch
+from optuna.storages._heartbeat import get_heartbeat_thread
+from optuna.trial import TrialState
+
+from roshan.algos.frozen import load_agent, policy_fn
+from roshan.checkpoints import checkpoint_path
+from roshan.config import Config, dump_config
+from roshan.experiment.spec import Run, Spec, SpecError
+from roshan.io import prepare_output, write_atomic, writing
+from roshan.runs.envs import make_env
+from roshan.runs.evaluate import run_episodes, save_buffer, write_outputs
+from roshan.runs.train import ensure_taichi_for, train
+from roshan.runtime import torch_device
+from roshan.study.storage import (
+    HOST_ID,
+    WORKER_ATTR,
+    RetryStaleTrial,
+    display_url,
+    experimental,
+    open_storage,
+    worker_record,
+)
+from roshan.study.studies import fail_stale
+from roshan.study.workers import Launcher
+
+STUDY_ATTR = "roshan_experiment"  # study user attribute: {"spec", "fingerprint", "runs": [keys in order]}
+RESULT_ATTR = "result"  # trial user attribute: the run's result dict
+PARAM = "run"
+JOURNAL_NAME = "experiment.journal"
+
+
+def experiment_dir(root: str | Path, name: str) -> Path:
+    return Path(root) / name
+
+
+def default_storage(root: str | Path, name: str) -> str:
+    return str((experiment_dir(root, name) / JOURNAL_NAME).resolve())
+
+
+def run_dir(root: str | Path, name: str, run: Run) -> Path:
+    return experiment_dir(root, name) / run.condition.name / f"seed_{run.seed}"
+
+
+def run_key(t: optuna.trial.FrozenTrial) -> str | None:
+    """The run a trial stands for (its fixed parameter before a worker took it, its parameter after)."""
+    return t.params.get(PARAM) or t.system_attrs.get("fixed_params", {}).get(PARAM)
+
+
+# ------------------------------------------------------------------------------------------ the study
+
+
+def prepare_experiment(storage, spec: Spec, echo: Callable[[str], None] = print) -> optuna.Study:
+    """Create the experiment's study with one waiting trial per run, or continue it (the spec must be the one it
+    was made from). Runs of the spec that the study lacks (a creator killed while enqueueing) are enqueued."""
+    keys = [r.key for r in spec.runs()]
+    meta = {"spec": spec.path, "fingerprint": spec.fingerprint(), "runs": keys}
+    try:
+        study = optuna.create_study(study_name=spec.name, storage=storage, direction="maximize")
+        study.set_user_attr(STUDY_ATTR, meta)
+    except optuna.exceptions.DuplicatedStudyError:
+        study = optuna.load_study(study_name=spec.name, storage=storage)
+        stored = _wait_for_meta(study)
+        if stored["fingerprint"] != meta["fingerprint"]:
+            raise SpecError(f"experiment {spec.name!r} in this storage was made from another spec ({stored['spec']}: "
+                            "other conditions, configs, seeds or evaluation); continue it with that spec unchanged, "
+                            "or give this one another name") from None
+    queued = {run_key(t) for t in study.get_trials(deepcopy=False) if t.state != TrialState.FAIL}
+    for key in keys:
+        if key not in queued:
+            study.enqueue_trial({PARAM: key})
+    return study
+
+
+def _wait_for_meta(study: optuna.Study, wait: float = 10.0) -> dict:
+    deadline = time.time() + wait
+    while STUDY_ATTR not in study.user_attrs:  # its creator is still writing it
+        if time.time() > deadline:
+            raise SpecError(f"study {study.study_name!r} in this storage is not an experiment (no {STUDY_ATTR})")
+        time.sleep(0.5)
+    return study.user_attrs[STUDY_ATTR]
+
+
+def load_experiment(storage, name: str) -> optuna.Study:
+    try:
+        study = optuna.load_study(study_name=name, storage=storage)
+    except KeyError:
+        names = optuna.get_all_study_names(storage)
+        raise SpecError(f"no experiment {name!r} in this storage; it holds {names or 'none'}") from None
+    _wait_for_meta(study)
+    return study
+
+
+def progress(study: optuna.Study) -> dict[str, int]:
+    """Runs by state: done (COMPLETE), running, waiting, and failed for good (FAIL and not retried)."""
+    trials = study.get_trials(deepcopy=False)
+    retried = {n for t in trials for n in t.system_attrs.get("retry_history", [])}
+    out = {"done": 0, "running": 0, "waiting": 0, "failed": 0}
+    for t in trials:
+        if run_key(t) is None or t.number in retried:
+            continue
+        if t.state == TrialState.COMPLETE:
+            out["done"] += 1
+        elif t.state == TrialState.RUNNING:
+            out["running"] += 1
+        elif t.state == TrialState.WAITING:
+            out["waiting"] += 1
+        elif t.state == TrialState.FAIL:
+            out["failed"] += 1
+    return out
+
+
+# ------------------------------------------------------------------------------------------ one worker
+
+
+def claim(study: optuna.Study, storage, keys: list[str]) -> tuple[optuna.Trial, str] | None:
+    """A waiting run for this worker, or None when none is left. ``study.ask()`` pops a waiting trial for one
+    caller only; if another worker took the last one meanwhile, ask() makes a fresh trial, which is failed
+    here at once (marked ``spare``: no run)."""
+    if not study.get_trials(deepcopy=False, states=(TrialState.WAITING,)):
+        return None
+    with warnings.catch_warnings():  # the heartbeat runs around the execution (run_worker), not in optimize()
+        warnings.filterwarnings("ignore", "Heartbeat of storage is supposed to be used with Study.optimize")
+        trial = study.ask()
+    fixed = storage.get_trial(trial._trial_id).system_attrs.get("fixed_params", {})
+    if PARAM not in fixed:
+        trial.set_user_attr("spare", True)
+        study.tell(trial, state=TrialState.FAIL)
+        return None
+    return trial, trial.suggest_categorical(PARAM, keys)
+
+
+def _taken_elsewhere(study: optuna.Study, trial: optuna.Trial, key: str) -> bool:
+    """Another live or finished trial holds the same run (a second guard: the queue has each run once)."""
+    return any(t.number != trial.number and run_key(t) == key and t.state in (TrialState.RUNNING, TrialState.COMPLETE)
+               for t in study.get_trials(deepcopy=False))
+
+
+Execute = Callable[[Run, Path], dict]
+
+
+def run_worker(spec: Spec, storage_url: str, root: str | Path, execute: Execute | None = None,
+               heartbeat: int | None = 60, max_retry: int | None = 3, extra: tuple[str, ...] = ()) -> int:
+    """Claim one run of ``spec``'s experiment, execute it and record its result; returns the exit code (0, or
+    130 when interrupted: the run is failed and queued again, and continues from its checkpoint)."""
+    storage = open_storage(storage_url, heartbeat, max_retry)
+    study = load_experiment(storage, spec.name)
+    stored = study.user_attrs[STUDY_ATTR]
+    if stored["fingerprint"] != spec.fingerprint():
+        raise SpecError(f"{spec.path} is not the spec experiment {spec.name!r} was made from ({stored['spec']})")
+    fail_stale(study)
+    got = claim(study, storage, stored["runs"])
+    if got is None:
+        return 0
+    trial, key = got
+    trial.set_user_attr(WORKER_ATTR, worker_record())
+    trial.set_user_attr("host", socket.gethostname())
+    if _taken_elsewhere(study, trial, key):
+        trial.set_user_attr("duplicate", True)
+        study.tell(trial, state=TrialState.FAIL)
+        return 0
+    runs = {r.key: r for r in spec.runs()}
+    run = runs[key]
+    folder = run_dir(root, spec.name, run)
+    execute = execute or (lambda r, d: execute_run(r, d, extra=extra))
+    try:
+        with get_heartbeat_thread(trial._trial_id, storage):
+            result = execute(run, folder)
+    except KeyboardInterrupt:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not cut the requeue short
+        study.tell(trial, state=TrialState.FAIL)
+        with experimental():
+            RetryStaleTrial(max_retry=None)(study, study._storage.get_trial(trial._trial_id))
+        return 130
+    except Exception:
+        study.tell(trial, state=TrialState.FAIL)  # failed for good: the traceback says why; retry by hand
+        raise
+    trial.set_user_attr(RESULT_ATTR, result)
+    study.tell(trial, float(result.get("success_rate", 0.0)))
+    return 0
+
+
+# ------------------------------------------------------------------------------------------ one run
+
+
+def execute_run(run: Run, folder: Path, extra: tuple[str, ...] = (), progress_bar: bool = False) -> dict:
+    """Train (continuing from the folder's latest checkpoint, if any) and evaluate one run; write and return its
+    result. A scripted controller only plays the evaluation episodes."""
+    cond = run.condition
+    extra = tuple(extra)
+    if cond.buffer is not None:
+        extra += (f"train.buffer_path={ensure_buffer(cond, folder.parent.parent / 'buffers')}",)
+    cfg = cond.run_config(run.seed, extra)
+    prepare_output(folder / "checkpoints", "the run folder")
+    ensure_taichi_for(cfg)
+    start = time.time()
+    trained = {}
+    if cond.trains:
+        if not checkpoint_path(folder, "latest").is_file():
+            dump_config(cfg, folder / "config.yaml")
+        trained = train(cfg, folder, resume=True, progress_bar=progress_bar, evaluate_at_end=False)
+    episodes = evaluate(run, cfg, folder)
+    ev_dir = folder / "eval" / f"{cond.eval_seed}-{cond.eval_episodes}"
+    summary = write_outputs(episodes, ev_dir, f"{run.key} ({len(episodes['reward'])} episodes, seed {cond.eval_seed})")
+    result = {
+        "run": run.key, "condition": cond.name, "seed": run.seed, "controller": cond.controller,
+        "episodes": summary["episodes"], "eval_seed": cond.eval_seed, "success_rate": summary["success_rate"],
+        "failure_rates": summary["failure_rates"], "tte": summary["tte"],
+        "tte_episodes": [int(t) for t in episodes["time"]],
+        "train": {k: trained[k] for k in ("updates", "env_steps", "seconds") if k in trained},
+        "minutes": round((time.time() - start) / 60.0, 3), "host": socket.gethostname(), "run_dir": str(folder),
+    }
+    with writing("the run's result", folder / "result.json"):
+        write_atomic(folder / "result.json", (json.dumps(result, indent=2) + "\n").encode())
+    return result
+
+
+def evaluate(run: Run, cfg: Config, folder: Path) -> dict:
+    """The condition's evaluation episodes (the same for every seed) with the run's best weights, or the
+    scripted controller."""
+    cond = run.condition
+    E = max(1, min(cond.eval_envs or cfg.train.eval_envs, cond.eval_episodes))
+    if cond.trains:
+        _, agent, _ = load_agent(folder, "best", torch_device())
+        env, act = make_env(cfg, E, cond.eval_seed, evaluation=True), policy_fn(agent)
+    else:
+        env = make_env(cfg, E, cond.eval_seed, evaluation=True, controller=cond.controller)
+        act = _idle(E, env.num_drones)
+    try:
+        return run_episodes(env, act, cond.eval_episodes, cond.eval_seed)
+    finally:
+        env.close()
+
+
+def _idle(num_envs: int, num_drones: int):
+    zeros = torch.zeros(num_envs, num_drones, dtype=torch.long)
+    return lambda obs: zeros  # the heuristic ignores its actions
+
+
+def ensure_buffer(cond, folder: Path) -> Path:
+    """The condition's replay buffer, recorded once (under a lock: the seeds' workers share it)."""
+    b = cond.buffer
+    path = folder / f"{Path(b.model).name}-{b.transitions}-{b.seed}.pt"
+    prepare_output(folder, "replay buffers")
+    with open(folder / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not path.is_file():
+            save_buffer(b.model, b.transitions, path, seed=b.seed, progress_bar=False)
+    return path
+
+
+# ------------------------------------------------------------------------------------------ the launcher
+
+
+class ExperimentLauncher(Launcher):
+    """Keeps ``workers`` worker processes (one run each) busy while runs are waiting."""
+
+    def __init__(self, spec: Spec, storage_url: str, root: str | Path, workers: int, worker_args: list[str],
+                 echo: Callable[[str], None] = print, poll: float = 1.0):
+        super().__init__(storage_url, spec.name, root, workers, worker_args, echo, poll)
+        self.spec = spec
+
+    def continue_hint(self) -> str:
+        return f"roshan experiment run {self.spec.path} --root {self.root}" + (
+            f" --budget {self.spec.budget}" if self.spec.budget != "local" else "")
+
+    def spawn(self, slot: int):
+        cmd = [sys.executable, "-m", "roshan", "experiment", "run", self.spec.path, "--worker", "--slot", str(slot),
+               "--budget", self.spec.budget, "--storage", self.storage_url, "--root", self.root, *self.worker_args]
+        paths = [str(Path(__file__).resolve().parents[2]), os.environ.get("PYTHONPATH", "")]
+        return subprocess.Popen(cmd, env={**os.environ, "PYTHONPATH": os.pathsep.join(p for p in paths if p)})
+
+    def report_finished(self, study: optuna.Study, _=None) -> None:
+        trials = study.get_trials(deepcopy=False)
+        retried = {n for t in trials for n in t.system_attrs.get("retry_history", [])}
+        for t in trials:
+            if not t.state.is_finished() or t.number in self.reported or run_key(t) is None:
+                continue
+            self.reported.add(t.number)
+            if t.state == TrialState.COMPLETE:
+                r = t.user_attrs.get(RESULT_ATTR, {})
+                self.echo(f"{run_key(t)}: success {r.get('success_rate', float('nan')):.1%} over {r.get('episodes')} "
+                          f"episodes ({r.get('minutes', 0):.1f} min)")
+            elif not t.user_attrs.get("duplicate"):
+                self.echo(f"{run_key(t)}: failed" + (" (its worker died or was interrupted; queued again)"
+                                                      if t.number in retried else ""))
+
+    def tick(self, study: optuna.Study, _=None) -> None:
+        fail_stale(study)
+        self.reap()
+        self.report_finished(study)
+        waiting = progress(study)["waiting"]
+        running = study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))
+        mine = {(t.user_attrs.get(WORKER_ATTR) or {}).get("pid") for t in running
+                if (t.user_attrs.get(WORKER_ATTR) or {}).get("host") == HOST_ID}
+        starting = sum(p.pid not in mine for p in self.procs.values())  # spawned, run not claimed yet
+        free = [s for s in range(self.workers) if s not in self.procs]
+        if self.crashed is None:
+            for slot in free[:max(0, waiting - starting)]:
+                self.procs[slot] = self.spawn(slot)
+
+
+def run_experiment(spec: Spec, root: str | Path = "runs", storage: str | None = None, workers: int = 1,
+                   worker_args: list[str] | tuple = (), heartbeat: int | None = 60, max_retry: int | None = 3,
+                   echo: Callable[[str], None] = print, poll: float = 1.0) -> optuna.Study:
+    """``roshan experiment run``: create or continue the experiment and run its waiting runs with ``workers``
+    processes on this machine; returns the study."""
+    url = storage or default_storage(root, spec.name)
+    store = open_storage(url, heartbeat, max_retry, repair=True, echo=echo)
+    study = prepare_experiment(store, spec, echo)
+    p = progress(study)
+    total = len(spec.runs())
+    echo(f"experiment {spec.name}: {p['done']}/{total} runs done, {p['waiting']} waiting, {workers} worker(s), "
+         f"storage {display_url(url)}")
+    launcher = ExperimentLauncher(spec, url, root, workers, list(worker_args), echo, poll)
+    launcher.reported = {t.number for t in study.get_trials(deepcopy=False) if t.state.is_finished()}
+    launcher.run(study, spec)
+    p = progress(study)
+    echo(f"experiment {spec.name}: {p['done']}/{total} runs done" + (f", {p['failed']} failed" if p["failed"] else ""))
+    return study

@@ -1,0 +1,257 @@
+"""An experiment spec: conditions x seeds, each a training run (or a scripted controller) plus an evaluation.
+
+A spec is a YAML file::
+
+    name: thesis                       # the experiment's folder and study name
+    seeds: 3                           # default seeds per condition: a count (0..n-1) or a list
+    eval: {episodes: 200, seed: 0}     # default evaluation: episodes, env seed, envs (default: the config's)
+    conditions:
+      E1_ppo:
+        config: configs/fly_simple.yaml          # relative to the spec's folder, or to the working directory
+        seeds: 10
+        set: {train.total_steps: 270336}         # --set overrides (a mapping or a list of "key=value")
+        thesis_set: {train.total_steps: 1080000} # replaces `set`'s values with ``--budget thesis``
+        thesis: {success: 91.15 ± 17.46 (100.0), timeout: 8.65 ± 17.31 (0.0)}   # the thesis's row, for the report
+      greedy:
+        config: configs/thesis/planner.yaml
+        controller: greedy                       # no training: the heuristic plays the evaluation episodes
+      E7_iql:
+        config: configs/iql_offline.yaml
+        buffer: {model: models/fly_collision, transitions: 200000}   # recorded once, shared by the seeds
+
+Expanded, every (condition, seed) is one run, keyed ``<condition>/seed_<s>``; its config is the condition's with
+``sim.seed`` = s. A condition's evaluation plays the same episodes for every seed (the env seed is the spec's).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from roshan.config import Config, apply_overrides, load_config
+
+CONTROLLERS = ("policy", "greedy")
+BUDGETS = ("local", "thesis")
+THESIS_METRICS = ("success", "collision", "boundary", "timeout", "burnout", "tte")
+_THESIS_VALUE = re.compile(r"^\s*([-+\d.]+)\s*(?:(?:±|\+-|\+/-)\s*([\d.]+))?\s*(?:\(\s*([-+\d.]+)\s*\))?\s*$")
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+
+
+class SpecError(ValueError):
+    """A spec that cannot be run: the message names the file, the condition and the key."""
+
+
+@dataclass(frozen=True)
+class Reference:
+    """One thesis figure: mean, std (over seeds) and median; std / median may be unknown (None)."""
+
+    mean: float
+    std: float | None = None
+    median: float | None = None
+
+    def __str__(self) -> str:
+        s = f"{self.mean:g}"
+        if self.std is not None:
+            s += f" ± {self.std:g}"
+        return s + (f" ({self.median:g})" if self.median is not None else "")
+
+
+@dataclass(frozen=True)
+class Buffer:
+    """A replay buffer recorded from a frozen policy before the condition's runs train on it (offline RL)."""
+
+    model: str
+    transitions: int
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Condition:
+    name: str
+    config: str | None  # resolved path, or None for the defaults
+    seeds: tuple[int, ...]
+    sets: tuple[str, ...] = ()
+    controller: str = "policy"
+    eval_episodes: int = 200
+    eval_seed: int = 0
+    eval_envs: int | None = None
+    buffer: Buffer | None = None
+    thesis: dict[str, Reference] = field(default_factory=dict)
+    note: str = ""
+
+    @property
+    def trains(self) -> bool:
+        return self.controller == "policy"
+
+    def run_config(self, seed: int, extra: tuple[str, ...] = ()) -> Config:
+        """The config of this condition's run with ``seed`` (the condition's overrides, then ``extra``)."""
+        return apply_overrides(load_config(self.config), [*self.sets, *extra, f"sim.seed={seed}"])
+
+
+@dataclass(frozen=True)
+class Run:
+    condition: Condition
+    seed: int
+
+    @property
+    def key(self) -> str:
+        return f"{self.condition.name}/seed_{self.seed}"
+
+
+@dataclass(frozen=True)
+class Spec:
+    name: str
+    path: str
+    budget: str
+    conditions: tuple[Condition, ...]
+
+    def runs(self, only: tuple[str, ...] = ()) -> list[Run]:
+        """Every (condition, seed), in the spec's order: conditions first, then seeds."""
+        return [Run(c, s) for c in self.conditions if not only or c.name in only for s in c.seeds]
+
+    def condition(self, name: str) -> Condition:
+        for c in self.conditions:
+            if c.name == name:
+                return c
+        raise SpecError(f"{self.path}: no condition {name!r}; it has {', '.join(c.name for c in self.conditions)}")
+
+    def fingerprint(self) -> str:
+        """What decides the runs (conditions, resolved configs and overrides, seeds, evaluation): a study made
+        from another fingerprint must not be joined."""
+        body = [(c.name, c.config and Path(c.config).read_text(), c.sets, c.seeds, c.controller, c.eval_episodes,
+                 c.eval_seed, c.eval_envs, c.buffer and vars(c.buffer)) for c in self.conditions]
+        return hashlib.sha256(json.dumps(body, default=str).encode()).hexdigest()[:16]
+
+
+def parse_reference(value: Any, where: str) -> Reference:
+    """``91.15 ± 17.46 (100.0)``, ``73`` or ``[mean, std, median]`` -> Reference."""
+    if isinstance(value, (int, float)):
+        return Reference(float(value))
+    if isinstance(value, (list, tuple)) and 1 <= len(value) <= 3:
+        nums = [None if v is None else float(v) for v in value] + [None] * (3 - len(value))
+        return Reference(*nums)
+    m = _THESIS_VALUE.match(str(value))
+    if not m:
+        raise SpecError(f"{where}: expected 'mean ± std (median)', a number or [mean, std, median], got {value!r}")
+    mean, std, median = m.groups()
+    return Reference(float(mean), None if std is None else float(std), None if median is None else float(median))
+
+
+def _sets(value: Any, where: str) -> tuple[str, ...]:
+    if value is None:
+        return ()
+    if isinstance(value, dict):
+        return tuple(f"{k}={_yaml_scalar(v)}" for k, v in value.items())
+    if isinstance(value, list) and all(isinstance(v, str) and "=" in v for v in value):
+        return tuple(value)
+    raise SpecError(f"{where}: expected a mapping of config keys to values, or a list of 'key=value', got {value!r}")
+
+
+def _yaml_scalar(v: Any) -> str:
+    return json.dumps(v) if isinstance(v, (list, dict)) else str(v).lower() if isinstance(v, bool) else str(v)
+
+
+def _seeds(value: Any, where: str) -> tuple[int, ...]:
+    if isinstance(value, int) and not isinstance(value, bool) and value >= 1:
+        return tuple(range(value))
+    if isinstance(value, list) and value and all(isinstance(s, int) and s >= 0 for s in value):
+        if len(set(value)) != len(value):
+            raise SpecError(f"{where}: a seed is listed twice in {value}")
+        return tuple(value)
+    raise SpecError(f"{where}: expected a number of seeds (>= 1) or a list of seeds (>= 0), got {value!r}")
+
+
+def _int(value: Any, where: str, lo: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < lo:
+        raise SpecError(f"{where}: expected an integer >= {lo}, got {value!r}")
+    return value
+
+
+def _resolve(path: str, spec_dir: Path, where: str) -> str:
+    """A file named in the spec: relative to the spec's folder if it is there, else to the working directory."""
+    for candidate in (spec_dir / path, Path(path)):
+        if candidate.is_file() or candidate.is_dir():
+            return str(candidate)
+    raise SpecError(f"{where}: {path} not found (looked in {spec_dir} and {Path.cwd()})")
+
+
+_CONDITION_KEYS = {"config", "seeds", "set", "thesis_set", "controller", "eval", "buffer", "thesis", "note"}
+_EVAL_KEYS = {"episodes", "seed", "envs"}
+
+
+def _condition(name: str, raw: Any, defaults: dict, spec_dir: Path, budget: str, where: str) -> Condition:
+    at = f"{where}: conditions.{name}"
+    if not _NAME.match(name):
+        raise SpecError(f"{at}: a condition name may hold letters, digits, '_', '-' and '.' only")
+    if not isinstance(raw, dict):
+        raise SpecError(f"{at}: expected a mapping (config, seeds, set, ...), got {raw!r}")
+    unknown = set(raw) - _CONDITION_KEYS
+    if unknown:
+        expected = ", ".join(sorted(_CONDITION_KEYS))
+        raise SpecError(f"{at}: unknown key(s) {', '.join(sorted(unknown))}; expected {expected}")
+    controller = raw.get("controller", "policy")
+    if controller not in CONTROLLERS:
+        raise SpecError(f"{at}.controller: expected one of {', '.join(CONTROLLERS)}, got {controller!r}")
+    config = _resolve(str(raw["config"]), spec_dir, f"{at}.config") if raw.get("config") else None
+    sets = _sets(raw.get("set"), f"{at}.set")
+    if budget == "thesis":
+        sets += _sets(raw.get("thesis_set"), f"{at}.thesis_set")
+    ev = {**defaults["eval"], **(raw.get("eval") or {})}
+    unknown = set(ev) - _EVAL_KEYS
+    if unknown:
+        raise SpecError(f"{at}.eval: unknown key(s) {', '.join(sorted(unknown))}; expected episodes, seed, envs")
+    buffer = None
+    if raw.get("buffer") is not None:
+        b = raw["buffer"]
+        if not isinstance(b, dict) or set(b) - {"model", "transitions", "seed"} or "model" not in b:
+            raise SpecError(f"{at}.buffer: expected {{model: RUN, transitions: N, seed: S}}, got {b!r}")
+        buffer = Buffer(_resolve(str(b["model"]), spec_dir, f"{at}.buffer.model"),
+                        _int(b.get("transitions", 200_000), f"{at}.buffer.transitions", 1),
+                        _int(b.get("seed", 0), f"{at}.buffer.seed", 0))
+    thesis = {}
+    for metric, value in (raw.get("thesis") or {}).items():
+        if metric not in THESIS_METRICS:
+            raise SpecError(f"{at}.thesis: unknown metric {metric!r}; expected {', '.join(THESIS_METRICS)}")
+        thesis[metric] = parse_reference(value, f"{at}.thesis.{metric}")
+    seeds = _seeds(raw.get("seeds", defaults["seeds"]), f"{at}.seeds")
+    episodes = _int(ev.get("episodes", 200), f"{at}.eval.episodes", 1)
+    eval_seed = _int(ev.get("seed", 0), f"{at}.eval.seed", 0)
+    envs = None if ev.get("envs") is None else _int(ev["envs"], f"{at}.eval.envs", 1)
+    cond = Condition(name, config, seeds, sets, controller, episodes, eval_seed, envs, buffer, thesis,
+                     str(raw.get("note", "")))
+    try:  # a bad key or value fails now, naming the condition, not in a worker an hour later
+        cond.run_config(seeds[0])
+    except ValueError as exc:
+        raise SpecError(f"{at}: {exc}") from None
+    return cond
+
+
+def load_spec(path: str | Path, budget: str = "local") -> Spec:
+    """Read and check a spec file; ``budget`` ``thesis`` applies each condition's ``thesis_set``."""
+    path = Path(path)
+    if budget not in BUDGETS:
+        raise SpecError(f"--budget: expected one of {', '.join(BUDGETS)}, got {budget!r}")
+    try:
+        raw = yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise SpecError(f"{path}: cannot read the experiment spec ({exc.strerror})") from None
+    except yaml.YAMLError as exc:
+        raise SpecError(f"{path}: not valid YAML ({exc})") from None
+    if not isinstance(raw, dict) or not isinstance(raw.get("conditions"), dict) or not raw["conditions"]:
+        raise SpecError(f"{path}: expected a mapping with a non-empty 'conditions' mapping")
+    unknown = set(raw) - {"name", "seeds", "eval", "conditions", "note"}
+    if unknown:
+        raise SpecError(f"{path}: unknown key(s) {', '.join(sorted(unknown))}; expected name, seeds, eval, conditions")
+    name = str(raw.get("name") or path.stem) + ("" if budget == "local" else f"-{budget}")
+    if not _NAME.match(name):
+        raise SpecError(f"{path}: name {name!r} may hold letters, digits, '_', '-' and '.' only")
+    defaults = {"seeds": raw.get("seeds", 3), "eval": raw.get("eval") or {}}
+    conditions = tuple(_condition(str(k), v, defaults, path.parent, budget, str(path))
+                       for k, v in raw["conditions"].items())
+    return Spec(name, str(path), budget, conditions)

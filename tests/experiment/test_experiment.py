@@ -1,0 +1,237 @@
+"""The experiment runner: a spec expands to the right runs, a killed runner resumes without redoing finished runs,
+two workers sharing one storage never run the same (condition, seed) twice, and the report's mean ± std (median)
+match a hand computation. The runs here are fakes (a function that records what it was asked to run); one test
+trains and evaluates a real (tiny) run through the command line."""
+
+import json
+import multiprocessing as mp
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import optuna
+import pytest
+
+from roshan.experiment.report import condition_rows, markdown, rate
+from roshan.experiment.runner import prepare_experiment, progress, run_worker
+from roshan.experiment.spec import Reference, SpecError, load_spec
+from roshan.study.storage import open_storage
+
+REPO = Path(__file__).resolve().parents[2]
+
+SPEC = """
+name: demo
+seeds: 2
+eval: {{episodes: 4, seed: 9}}
+conditions:
+  fast:
+    config: {config}
+    set: {{train.max_updates: 3, sim.envs: 4}}
+    thesis_set: {{train.max_updates: 300}}
+    thesis: {{success: 91.15 ± 17.46 (100.0), timeout: [8.65, 17.31, 0.0]}}
+  more_seeds:
+    config: {config}
+    seeds: [5, 7, 11]
+  greedy:
+    config: {planner}
+    controller: greedy
+    seeds: 1
+    eval: {{episodes: 100, envs: 100}}
+"""
+
+
+def write_spec(tmp_path: Path, text: str = SPEC) -> Path:
+    path = tmp_path / "spec.yaml"
+    path.write_text(text.format(config=REPO / "configs" / "fly_simple.yaml", planner=REPO / "configs" / "planner.yaml"))
+    return path
+
+
+def test_spec_expands_to_conditions_times_seeds(tmp_path):
+    spec = load_spec(write_spec(tmp_path))
+    assert [r.key for r in spec.runs()] == ["fast/seed_0", "fast/seed_1", "more_seeds/seed_5", "more_seeds/seed_7",
+                                            "more_seeds/seed_11", "greedy/seed_0"]
+    fast, more, greedy = spec.conditions
+    cfg = fast.run_config(1)
+    assert (cfg.sim.seed, cfg.sim.envs, cfg.train.max_updates) == (1, 4, 3)
+    assert more.run_config(7).sim.seed == 7 and more.run_config(7).sim.envs == 64  # the config's own value
+    assert (fast.eval_episodes, fast.eval_seed, greedy.eval_envs) == (4, 9, 100)
+    assert not greedy.trains and fast.trains
+    assert fast.thesis["success"] == Reference(91.15, 17.46, 100.0)
+    assert fast.thesis["timeout"] == Reference(8.65, 17.31, 0.0)
+    thesis = load_spec(write_spec(tmp_path), budget="thesis")
+    assert thesis.name == "demo-thesis" and thesis.conditions[0].run_config(0).train.max_updates == 300
+    assert thesis.fingerprint() != spec.fingerprint()
+
+
+@pytest.mark.parametrize("change, message", [
+    (("seeds: 2", "seeds: 0"), "conditions.fast.seeds: expected a number of seeds"),
+    (("controller: greedy", "controller: heuristic"), "conditions.greedy.controller: expected one of policy, greedy"),
+    (("thesis_set:", "thesis_sets:"), "conditions.fast: unknown key(s) thesis_sets"),
+    (("(100.0)", "(100.0"), "conditions.fast.thesis.success: expected 'mean ± std (median)'"),
+    (("sim.envs: 4", "sim.envz: 4"), "conditions.fast: "),
+    (("seeds: [5, 7, 11]", "seeds: [5, 5]"), "a seed is listed twice"),
+])
+def test_bad_specs_name_the_condition_and_key(tmp_path, change, message):
+    path = write_spec(tmp_path, SPEC.replace(*change))
+    with pytest.raises(SpecError) as err:
+        load_spec(path)
+    assert message in str(err.value) and str(path) in str(err.value)
+
+
+def test_a_missing_config_file_is_named(tmp_path):
+    path = tmp_path / "spec.yaml"
+    path.write_text("conditions:\n  a:\n    config: nowhere.yaml\n")
+    with pytest.raises(SpecError, match=r"conditions.a.config: nowhere.yaml not found"):
+        load_spec(path)
+
+
+# ------------------------------------------------------------------------------------------ running (fakes)
+
+
+def fake_result(run) -> dict:
+    """A result as execute_run returns it, with a success rate that depends on the seed."""
+    return {"run": run.key, "condition": run.condition.name, "seed": run.seed, "episodes": 4, "eval_seed": 9,
+            "success_rate": 0.25 * (run.seed % 5), "failure_rates": {"timeout": 1 - 0.25 * (run.seed % 5)},
+            "tte": {}, "tte_episodes": [100 + run.seed, 200], "minutes": 0.0}
+
+
+def recording_execute(log: Path, pause: float = 0.0):
+    def execute(run, folder):
+        with open(log, "a") as f:  # O_APPEND: whole lines even from several processes
+            f.write(f"start {run.key} {os.getpid()}\n")
+        time.sleep(pause)
+        if (log.parent / "hang").exists() and run.key == "more_seeds/seed_5":
+            time.sleep(3600)  # the test kills this worker here
+        with open(log, "a") as f:
+            f.write(f"done {run.key} {os.getpid()}\n")
+        return fake_result(run)
+    return execute
+
+
+def lines(log: Path, what: str) -> list[str]:
+    return [ln.split()[1] for ln in log.read_text().splitlines() if ln.startswith(what)]
+
+
+def drain(spec_path: Path, url: str, root: Path, log: Path, pause: float) -> None:
+    """A worker process: run experiment runs one after another until none is waiting."""
+    spec = load_spec(spec_path)
+    storage = open_storage(url, heartbeat=60)
+    while True:
+        study = optuna.load_study(study_name=spec.name, storage=storage)
+        if progress(study)["waiting"] == 0:
+            return
+        run_worker(spec, url, root, execute=recording_execute(log, pause))
+
+
+def start(spec_path, tmp_path):
+    spec = load_spec(spec_path)
+    url = str(tmp_path / "experiment.journal")
+    study = prepare_experiment(open_storage(url, heartbeat=60), spec)
+    return spec, url, study
+
+
+def test_two_workers_sharing_a_storage_never_run_the_same_run_twice(tmp_path):
+    spec_path = write_spec(tmp_path)
+    spec, url, _ = start(spec_path, tmp_path)
+    log = tmp_path / "log"
+    ctx = mp.get_context("fork")
+    workers = [ctx.Process(target=drain, args=(spec_path, url, tmp_path, log, 0.2)) for _ in range(2)]
+    for w in workers:
+        w.start()
+    for w in workers:
+        w.join(120)
+        assert w.exitcode == 0
+    done = lines(log, "done")
+    assert sorted(done) == sorted(r.key for r in spec.runs())  # every run once, none twice
+    pids = {ln.split()[2] for ln in log.read_text().splitlines()}
+    assert len(pids) == 2, "both workers should have taken runs"
+    _, _, study = start(spec_path, tmp_path)  # joining again enqueues nothing new
+    assert progress(study) == {"done": 6, "running": 0, "waiting": 0, "failed": 0}
+
+
+def test_a_killed_runner_resumes_without_redoing_finished_runs(tmp_path):
+    spec_path = write_spec(tmp_path)
+    spec, url, _ = start(spec_path, tmp_path)
+    log = tmp_path / "log"
+    (tmp_path / "hang").touch()
+    worker = mp.get_context("fork").Process(target=drain, args=(spec_path, url, tmp_path, log, 0.0))
+    worker.start()
+    deadline = time.time() + 60
+    while "more_seeds/seed_5" not in (lines(log, "start") if log.exists() else []):
+        assert time.time() < deadline and worker.is_alive()
+        time.sleep(0.05)
+    os.kill(worker.pid, signal.SIGKILL)  # as a crash, a lost machine or `kill -9` would
+    worker.join()
+    finished_before = lines(log, "done")
+    assert finished_before == ["fast/seed_0", "fast/seed_1"]
+    (tmp_path / "hang").unlink()
+    spec, url, study = start(spec_path, tmp_path)  # `roshan experiment run SPEC` again
+    drain(spec_path, url, tmp_path, log, 0.0)
+    done = lines(log, "done")
+    assert sorted(done) == sorted(r.key for r in spec.runs())  # the two finished runs were not run again
+    assert done[-1] == "more_seeds/seed_5"  # its retry was queued behind the waiting runs
+    assert lines(log, "start").count("more_seeds/seed_5") == 2  # the killed one was
+    assert progress(study)["done"] == 6
+
+
+# ------------------------------------------------------------------------------------------ the report
+
+
+def test_report_is_mean_std_median_over_seeds_beside_the_thesis(tmp_path):
+    spec = load_spec(write_spec(tmp_path))
+    results = {r.key: fake_result(r) for r in spec.runs() if r.condition.name != "greedy"}
+    results["more_seeds/seed_7"]["failure_rates"] = {"timeout": 0.25, "collision": 0.25}
+    rows = {r["condition"]: r for r in condition_rows(spec, results)}
+    # more_seeds: seeds 5, 7, 11 -> success 0 %, 50 %, 25 %; by hand: mean 25, std sqrt((625 + 625 + 0) / 3)
+    s = rows["more_seeds"]["success"]
+    assert (s.mean, s.median) == (25.0, 25.0) and s.std == pytest.approx(np.sqrt(1250 / 3))
+    c = rows["more_seeds"]["collision"]
+    assert c.mean == pytest.approx(25 / 3) and c.median == 0.0
+    t = rows["more_seeds"]["tte"]  # over all six episodes: 105, 200, 107, 200, 111, 200
+    assert t.mean == pytest.approx(923 / 6) and t.median == pytest.approx((111 + 200) / 2)
+    assert rows["greedy"]["seeds"] == 0 and rows["fast"]["seeds"] == 2
+    assert rate(results["fast/seed_1"], "success") == 25.0
+    table = markdown(spec, list(rows.values()))
+    assert "| fast | 2/2 | success % | 12.5 ± 12.5 (12.5) | 91.15 ± 17.46 (100) |" in table
+    assert "| greedy | 0/1 | - | not run yet | - |" in table
+    assert "collision %" not in table.split("| more_seeds")[0]  # fast never collided: no collision row
+
+
+# ------------------------------------------------------------------------------------------ a real run
+
+
+def test_the_command_trains_evaluates_and_reports_a_tiny_experiment(tmp_path):
+    spec = tmp_path / "tiny.yaml"
+    spec.write_text(f"""
+name: tiny
+seeds: 1
+eval: {{episodes: 2, seed: 3, envs: 2}}
+conditions:
+  simple:
+    config: {REPO / "configs" / "fly_simple.yaml"}
+    set: {{sim.envs: 4, train.max_updates: 1, train.total_steps: 0, train.max_minutes: 0, ppo.horizon: 64,
+          ppo.batch_size: 32}}
+    thesis: {{success: 91.15 ± 17.46 (100.0)}}
+""")
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    cmd = [sys.executable, "-m", "roshan", "experiment"]
+    out = subprocess.run([*cmd, "run", str(spec), "--root", str(tmp_path / "runs"), "--threads", "1"], env=env,
+                         capture_output=True, text=True, timeout=900, cwd=REPO)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "simple/seed_0: success" in out.stdout
+    result = json.loads((tmp_path / "runs" / "tiny" / "simple" / "seed_0" / "result.json").read_text())
+    assert result["episodes"] == 2 and result["train"]["updates"] == 1
+    rep = subprocess.run([*cmd, "report", str(spec), "--root", str(tmp_path / "runs")], env=env,
+                         capture_output=True, text=True, timeout=300, cwd=REPO)
+    assert rep.returncode == 0, rep.stderr[-3000:]
+    assert "1/1 runs done" in rep.stdout and "| simple | 1/1 | success % |" in rep.stdout
+    report = tmp_path / "runs" / "tiny" / "report"
+    assert (report / "success.png").stat().st_size > 0
+    assert (report / "runs" / "simple" / "seed_0.json").is_file()
+    again = subprocess.run([*cmd, "run", str(spec), "--root", str(tmp_path / "runs")], env=env,
+                           capture_output=True, text=True, timeout=300, cwd=REPO)
+    assert again.returncode == 0 and "1/1 runs done, 0 waiting" in again.stdout  # nothing is run twice
