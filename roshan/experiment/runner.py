@@ -54,9 +54,9 @@ from roshan.study.storage import (
 from roshan.study.studies import fail_stale
 from roshan.study.workers import Launcher
 
-STUDY_ATTR = "roshan_experiment"  # study user attribute: {"spec", "fingerprint", "runs": [keys in order]}
+STUDY_ATTR = "roshan_experiment"  # study user attribute: {"spec": path, "runs": {key: fingerprint}}
 RESULT_ATTR = "result"  # trial user attribute: the run's result dict
-PARAM = "run"
+RUN_ATTR = "run"  # trial user attribute: the run's key, set when it is queued (a retry inherits it)
 JOURNAL_NAME = "experiment.journal"
 
 
@@ -73,33 +73,40 @@ def run_dir(root: str | Path, name: str, run: Run) -> Path:
 
 
 def run_key(t: optuna.trial.FrozenTrial) -> str | None:
-    """The run a trial stands for (its fixed parameter before a worker took it, its parameter after)."""
-    return t.params.get(PARAM) or t.system_attrs.get("fixed_params", {}).get(PARAM)
+    """The run a trial stands for (None for a spare trial, see :func:`claim`)."""
+    return t.user_attrs.get(RUN_ATTR)
 
 
 # ------------------------------------------------------------------------------------------ the study
 
 
 def prepare_experiment(storage, spec: Spec, echo: Callable[[str], None] = print) -> optuna.Study:
-    """Create the experiment's study with one waiting trial per run, or continue it (the spec must be the one it
-    was made from). Runs of the spec that the study lacks (a creator killed while enqueueing) are enqueued."""
-    keys = [r.key for r in spec.runs()]
-    meta = {"spec": spec.path, "fingerprint": spec.fingerprint(), "runs": keys}
+    """Create the experiment's study with one waiting trial per run, or continue it. Runs the study lacks (new
+    conditions or seeds, a creator killed while enqueueing, a run that failed) are queued; a stored run whose
+    settings differ from the spec's is refused."""
+    prints = spec.fingerprints()
     try:
         study = optuna.create_study(study_name=spec.name, storage=storage, direction="maximize")
-        study.set_user_attr(STUDY_ATTR, meta)
+        study.set_user_attr(STUDY_ATTR, {"spec": spec.path, "runs": prints})
     except optuna.exceptions.DuplicatedStudyError:
         study = optuna.load_study(study_name=spec.name, storage=storage)
         stored = _wait_for_meta(study)
-        if stored["fingerprint"] != meta["fingerprint"]:
-            raise SpecError(f"experiment {spec.name!r} in this storage was made from another spec ({stored['spec']}: "
-                            "other conditions, configs, seeds or evaluation); continue it with that spec unchanged, "
-                            "or give this one another name") from None
+        check_runs(spec, stored)
+        study.set_user_attr(STUDY_ATTR, {"spec": spec.path, "runs": {**stored["runs"], **prints}})
     queued = {run_key(t) for t in study.get_trials(deepcopy=False) if t.state != TrialState.FAIL}
-    for key in keys:
+    for key in prints:
         if key not in queued:
-            study.enqueue_trial({PARAM: key})
+            study.enqueue_trial({}, user_attrs={RUN_ATTR: key})
     return study
+
+
+def check_runs(spec: Spec, stored: dict) -> None:
+    """Refuse a spec under which a stored run would mean something else (config, controller, evaluation)."""
+    changed = [k for k, fp in spec.fingerprints().items() if stored["runs"].get(k, fp) != fp]
+    if changed:
+        raise SpecError(f"{spec.path}: experiment {spec.name!r} holds runs made with other settings under the same "
+                        f"keys ({', '.join(changed[:6])}{' ...' if len(changed) > 6 else ''}): keep their conditions "
+                        "as they were (add new conditions instead), or give the spec another name")
 
 
 def _wait_for_meta(study: optuna.Study, wait: float = 10.0) -> dict:
@@ -121,13 +128,14 @@ def load_experiment(storage, name: str) -> optuna.Study:
     return study
 
 
-def progress(study: optuna.Study) -> dict[str, int]:
-    """Runs by state: done (COMPLETE), running, waiting, and failed for good (FAIL and not retried)."""
+def progress(study: optuna.Study, keys=None) -> dict[str, int]:
+    """Runs (of ``keys``, default all) by state: done (COMPLETE), running, waiting, and failed for good (FAIL and
+    not retried)."""
     trials = study.get_trials(deepcopy=False)
     retried = {n for t in trials for n in t.system_attrs.get("retry_history", [])}
     out = {"done": 0, "running": 0, "waiting": 0, "failed": 0}
     for t in trials:
-        if run_key(t) is None or t.number in retried:
+        if run_key(t) is None or t.number in retried or (keys is not None and run_key(t) not in keys):
             continue
         if t.state == TrialState.COMPLETE:
             out["done"] += 1
@@ -143,7 +151,7 @@ def progress(study: optuna.Study) -> dict[str, int]:
 # ------------------------------------------------------------------------------------------ one worker
 
 
-def claim(study: optuna.Study, storage, keys: list[str]) -> tuple[optuna.Trial, str] | None:
+def claim(study: optuna.Study) -> tuple[optuna.Trial, str] | None:
     """A waiting run for this worker, or None when none is left. ``study.ask()`` pops a waiting trial for one
     caller only; if another worker took the last one meanwhile, ask() makes a fresh trial, which is failed
     here at once (marked ``spare``: no run)."""
@@ -152,12 +160,12 @@ def claim(study: optuna.Study, storage, keys: list[str]) -> tuple[optuna.Trial, 
     with warnings.catch_warnings():  # the heartbeat runs around the execution (run_worker), not in optimize()
         warnings.filterwarnings("ignore", "Heartbeat of storage is supposed to be used with Study.optimize")
         trial = study.ask()
-    fixed = storage.get_trial(trial._trial_id).system_attrs.get("fixed_params", {})
-    if PARAM not in fixed:
+    key = trial.user_attrs.get(RUN_ATTR)
+    if key is None:
         trial.set_user_attr("spare", True)
         study.tell(trial, state=TrialState.FAIL)
         return None
-    return trial, trial.suggest_categorical(PARAM, keys)
+    return trial, key
 
 
 def _taken_elsewhere(study: optuna.Study, trial: optuna.Trial, key: str) -> bool:
@@ -175,11 +183,9 @@ def run_worker(spec: Spec, storage_url: str, root: str | Path, execute: Execute 
     130 when interrupted: the run is failed and queued again, and continues from its checkpoint)."""
     storage = open_storage(storage_url, heartbeat, max_retry)
     study = load_experiment(storage, spec.name)
-    stored = study.user_attrs[STUDY_ATTR]
-    if stored["fingerprint"] != spec.fingerprint():
-        raise SpecError(f"{spec.path} is not the spec experiment {spec.name!r} was made from ({stored['spec']})")
+    check_runs(spec, study.user_attrs[STUDY_ATTR])
     fail_stale(study)
-    got = claim(study, storage, stored["runs"])
+    got = claim(study)
     if got is None:
         return 0
     trial, key = got
@@ -190,6 +196,11 @@ def run_worker(spec: Spec, storage_url: str, root: str | Path, execute: Execute 
         study.tell(trial, state=TrialState.FAIL)
         return 0
     runs = {r.key: r for r in spec.runs()}
+    if key not in runs:  # queued by a larger spec on another machine: leave it to that one
+        study.tell(trial, state=TrialState.FAIL)
+        with experimental():
+            RetryStaleTrial(max_retry=None)(study, study._storage.get_trial(trial._trial_id))
+        return 0
     run = runs[key]
     folder = run_dir(root, spec.name, run)
     execute = execute or (lambda r, d: execute_run(r, d, extra=extra))
@@ -289,6 +300,7 @@ class ExperimentLauncher(Launcher):
                  echo: Callable[[str], None] = print, poll: float = 1.0):
         super().__init__(storage_url, spec.name, root, workers, worker_args, echo, poll)
         self.spec = spec
+        self.keys = {r.key for r in spec.runs()}
 
     def continue_hint(self) -> str:
         return f"roshan experiment run {self.spec.path} --root {self.root}" + (
@@ -319,7 +331,7 @@ class ExperimentLauncher(Launcher):
         fail_stale(study)
         self.reap()
         self.report_finished(study)
-        waiting = progress(study)["waiting"]
+        waiting = progress(study, self.keys)["waiting"]  # runs another machine's larger spec added are its own
         running = study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))
         mine = {(t.user_attrs.get(WORKER_ATTR) or {}).get("pid") for t in running
                 if (t.user_attrs.get(WORKER_ATTR) or {}).get("host") == HOST_ID}
@@ -338,13 +350,14 @@ def run_experiment(spec: Spec, root: str | Path = "runs", storage: str | None = 
     url = storage or default_storage(root, spec.name)
     store = open_storage(url, heartbeat, max_retry, repair=True, echo=echo)
     study = prepare_experiment(store, spec, echo)
-    p = progress(study)
-    total = len(spec.runs())
+    keys = {r.key for r in spec.runs()}
+    p = progress(study, keys)
+    total = len(keys)
     echo(f"experiment {spec.name}: {p['done']}/{total} runs done, {p['waiting']} waiting, {workers} worker(s), "
          f"storage {display_url(url)}")
     launcher = ExperimentLauncher(spec, url, root, workers, list(worker_args), echo, poll)
     launcher.reported = {t.number for t in study.get_trials(deepcopy=False) if t.state.is_finished()}
     launcher.run(study, spec)
-    p = progress(study)
+    p = progress(study, keys)
     echo(f"experiment {spec.name}: {p['done']}/{total} runs done" + (f", {p['failed']} failed" if p["failed"] else ""))
     return study

@@ -21,6 +21,8 @@ A spec is a YAML file::
 
 Expanded, every (condition, seed) is one run, keyed ``<condition>/seed_<s>``; its config is the condition's with
 ``sim.seed`` = s. A condition's evaluation plays the same episodes for every seed (the env seed is the spec's).
+Runs are queued in the spec's order (conditions, then seeds), so list what matters most first. A spec may grow
+(new conditions or seeds join a running experiment); a run whose settings changed under its key is refused.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from typing import Any
 import yaml
 
 from roshan.config import Config, apply_overrides, load_config
+from roshan.config.schema import to_dict
 
 CONTROLLERS = ("policy", "greedy")
 BUDGETS = ("local", "thesis")
@@ -103,6 +106,12 @@ class Run:
     def key(self) -> str:
         return f"{self.condition.name}/seed_{self.seed}"
 
+    def fingerprint(self) -> str:
+        c = self.condition
+        body = [to_dict(c.run_config(self.seed)), c.controller, c.eval_episodes, c.eval_seed, c.eval_envs,
+                c.buffer and vars(c.buffer)]
+        return hashlib.sha256(json.dumps(body, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
 
 @dataclass(frozen=True)
 class Spec:
@@ -121,12 +130,10 @@ class Spec:
                 return c
         raise SpecError(f"{self.path}: no condition {name!r}; it has {', '.join(c.name for c in self.conditions)}")
 
-    def fingerprint(self) -> str:
-        """What decides the runs (conditions, resolved configs and overrides, seeds, evaluation): a study made
-        from another fingerprint must not be joined."""
-        body = [(c.name, c.config and Path(c.config).read_text(), c.sets, c.seeds, c.controller, c.eval_episodes,
-                 c.eval_seed, c.eval_envs, c.buffer and vars(c.buffer)) for c in self.conditions]
-        return hashlib.sha256(json.dumps(body, default=str).encode()).hexdigest()[:16]
+    def fingerprints(self) -> dict[str, str]:
+        """run key -> what decides that run (its resolved config, controller, evaluation, buffer): a stored run
+        with another fingerprint is another run, and continuing it under this key is refused."""
+        return {r.key: r.fingerprint() for r in self.runs()}
 
 
 def parse_reference(value: Any, where: str) -> Reference:

@@ -64,7 +64,8 @@ def test_spec_expands_to_conditions_times_seeds(tmp_path):
     assert fast.thesis["timeout"] == Reference(8.65, 17.31, 0.0)
     thesis = load_spec(write_spec(tmp_path), budget="thesis")
     assert thesis.name == "demo-thesis" and thesis.conditions[0].run_config(0).train.max_updates == 300
-    assert thesis.fingerprint() != spec.fingerprint()
+    assert thesis.fingerprints()["fast/seed_0"] != spec.fingerprints()["fast/seed_0"]
+    assert thesis.fingerprints()["greedy/seed_0"] == spec.fingerprints()["greedy/seed_0"]
 
 
 @pytest.mark.parametrize("change, message", [
@@ -176,6 +177,18 @@ def test_a_killed_runner_resumes_without_redoing_finished_runs(tmp_path):
     assert done[-1] == "more_seeds/seed_5"  # its retry was queued behind the waiting runs
     assert lines(log, "start").count("more_seeds/seed_5") == 2  # the killed one was
     assert progress(study)["done"] == 6
+
+
+def test_a_spec_may_grow_but_not_change_a_stored_run(tmp_path):
+    spec_path = write_spec(tmp_path)
+    start(spec_path, tmp_path)
+    spec_path.write_text(spec_path.read_text().replace("seeds: [5, 7, 11]", "seeds: [5, 7, 11, 13]"))
+    spec, _, study = start(spec_path, tmp_path)  # one more seed joins the queue
+    assert progress(study)["waiting"] == 7
+    spec_path.write_text(spec_path.read_text().replace("train.max_updates: 3", "train.max_updates: 4"))
+    with pytest.raises(SpecError, match=r"runs made with other settings under the same keys \(fast/seed_0, "
+                                        r"fast/seed_1\)"):
+        start(spec_path, tmp_path)
 
 
 # ------------------------------------------------------------------------------------------ the report
