@@ -355,7 +355,7 @@ EXPERIMENT_STORAGE = click.option(
                                     "journal file (default: ROOT/NAME/experiment.journal).")
 BUDGET = click.option("--budget", type=click.Choice(["local", "thesis"]), default="local", show_default=True,
                       help="The spec's budgets for this machine, or the thesis's own (each condition's thesis_set; "
-                           "a separate experiment, NAME-thesis).")
+                           "a separate experiment, NAME-thesis-budget).")
 
 
 @experiment.command("run")

@@ -255,7 +255,7 @@ def load_spec(path: str | Path, budget: str = "local") -> Spec:
     unknown = set(raw) - {"name", "seeds", "eval", "conditions", "note"}
     if unknown:
         raise SpecError(f"{path}: unknown key(s) {', '.join(sorted(unknown))}; expected name, seeds, eval, conditions")
-    name = str(raw.get("name") or path.stem) + ("" if budget == "local" else f"-{budget}")
+    name = str(raw.get("name") or path.stem) + ("" if budget == "local" else "-thesis-budget")
     if not _NAME.match(name):
         raise SpecError(f"{path}: name {name!r} may hold letters, digits, '_', '-' and '.' only")
     defaults = {"seeds": raw.get("seeds", 3), "eval": raw.get("eval") or {}}

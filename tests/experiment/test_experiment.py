@@ -63,7 +63,7 @@ def test_spec_expands_to_conditions_times_seeds(tmp_path):
     assert fast.thesis["success"] == Reference(91.15, 17.46, 100.0)
     assert fast.thesis["timeout"] == Reference(8.65, 17.31, 0.0)
     thesis = load_spec(write_spec(tmp_path), budget="thesis")
-    assert thesis.name == "demo-thesis" and thesis.conditions[0].run_config(0).train.max_updates == 300
+    assert thesis.name == "demo-thesis-budget" and thesis.conditions[0].run_config(0).train.max_updates == 300
     assert thesis.fingerprints()["fast/seed_0"] != spec.fingerprints()["fast/seed_0"]
     assert thesis.fingerprints()["greedy/seed_0"] == spec.fingerprints()["greedy/seed_0"]
 
