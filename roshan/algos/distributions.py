@@ -2,6 +2,7 @@
 
 import math
 
+import numpy as np
 import torch
 from torch.nn import functional as F
 
@@ -54,6 +55,12 @@ class ClippedGaussian:
         return mean.clamp(-1.0, 1.0)
 
 
+# Gauss-Hermite nodes and weights for E[f(Z)], Z ~ N(0, 1): sqrt(2) x_i and w_i / sqrt(pi) of the 5-point rule.
+_GH_X, _GH_W = np.polynomial.hermite.hermgauss(5)
+_GH_NODES = torch.tensor(_GH_X * math.sqrt(2.0), dtype=torch.float32)
+_GH_WEIGHTS = torch.tensor(_GH_W / math.sqrt(math.pi), dtype=torch.float32)
+
+
 class TanhNormal:
     """a = tanh(u), u ~ N(mu, std): the exact squashed-Gaussian density, reparameterised sampling."""
 
@@ -96,6 +103,16 @@ class TanhNormal:
         """Entropy of the base Normal averaged over dimensions (the reference's choice; no closed form
         exists for the squashed density): [B]."""
         return self.base.entropy().mean(-1)
+
+    def squashed_entropy(self) -> torch.Tensor:
+        """Entropy of the actions themselves, H[tanh(u)] = H[u] + E[log(1 - tanh(u)^2)], averaged over dimensions
+        like :meth:`entropy`: [B]. The expectation is a 5-node Gauss-Hermite quadrature (deterministic, smooth in
+        the mean and std). Unlike the base entropy it falls as the mean moves into tanh's flat tails, where
+        every sample gives the same action: its bonus pulls a saturating mean back (see ``ppo.tanh_entropy``)."""
+        mu, std = self.base.mean, self.base.stddev
+        u = mu.unsqueeze(-1) + std.unsqueeze(-1) * _GH_NODES.to(mu)  # [B, A, 5]
+        log_det = 2.0 * (math.log(2.0) - u - F.softplus(-2.0 * u))
+        return (self.base.entropy() + (log_det * _GH_WEIGHTS.to(mu)).sum(-1)).mean(-1)
 
     @property
     def mode(self) -> torch.Tensor:

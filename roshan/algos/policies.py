@@ -45,6 +45,9 @@ class NoCache:
         pass
 
 
+SATURATED = 2.185  # atanh(0.975): a pre-tanh mean beyond it gives the action +-1 after the 41-level rounding
+
+
 class FlyPolicy:
     """The FlyAgent actor-critic (:class:`ActorCritic`) with its ClippedGaussian or TanhNormal distribution,
     the frame cache for acting and the manual log-std schedules of learning.md 4."""
@@ -55,6 +58,8 @@ class FlyPolicy:
         self.net.log_std.requires_grad_(cfg.log_std == "learned")
         self.shares_encoder = cfg.share_encoder
         self.dist_class = TanhNormal if cfg.use_tanh_dist else ClippedGaussian
+        self.squashed_entropy = cfg.use_tanh_dist and cfg.tanh_entropy == "squashed"
+        self._saturated: list[float] = []
         self.novelty_dim = frames * AGENT_FEATURES
 
     @staticmethod
@@ -116,7 +121,10 @@ class FlyPolicy:
 
     def _score(self, mean, std, value, stored):
         dist = self.dist_class(mean, std)
-        return dist.log_prob_raw(stored), dist.entropy(), value
+        if self.dist_class is TanhNormal:  # the share of pre-tanh means in tanh's flat tails, for the logs
+            self._saturated.append(float((mean.detach().abs() > SATURATED).float().mean()))
+        entropy = dist.squashed_entropy() if self.squashed_entropy else dist.entropy()
+        return dist.log_prob_raw(stored), entropy, value
 
     def before_update(self, updates: int) -> None:
         """The manual schedules of learning.md 4, applied before each update (k = finished updates); nothing
@@ -129,7 +137,11 @@ class FlyPolicy:
                 self.net.log_std.add_(math.log(rho))
 
     def update_metrics(self) -> dict[str, float]:
-        return {"std": float(self.net.log_std.detach().exp()[0])}
+        out = {"std": float(self.net.log_std.detach().exp()[0])}
+        if self._saturated:
+            out["saturated"] = sum(self._saturated) / len(self._saturated)
+            self._saturated.clear()
+        return out
 
 
 class PlannerPolicy:

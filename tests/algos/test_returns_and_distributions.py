@@ -80,3 +80,21 @@ def test_clipped_gaussian_uses_the_clamped_action():
     torch.testing.assert_close(lp, expected.unsqueeze(0))
     assert dist.sample().abs().max() <= 1.0
     assert dist.entropy().item() == pytest.approx(2 * (0.5 * math.log(2 * math.pi * math.e)))
+
+
+@pytest.mark.parametrize("mu, std", [(0.0, 1.0), (2.0, 0.85), (5.0, 0.85), (-3.0, 0.3)])
+def test_squashed_entropy_is_the_entropy_of_the_actions(mu, std):
+    # H[tanh(u)] = -E[log p(a)] by Monte Carlo over a million samples, against the quadrature.
+    d = TanhNormal(torch.tensor([[mu, mu]]), torch.tensor([std, std]))
+    u = d.base.sample((1_000_000,))[:, 0]
+    mc = -d.log_prob_raw(u).mean() / 2  # averaged over the two dimensions, as entropy() is
+    assert float(d.squashed_entropy()[0]) == pytest.approx(float(mc), abs=0.01)
+
+
+def test_squashed_entropy_pulls_a_saturated_mean_back_where_the_base_entropy_does_not():
+    mu = torch.tensor([[4.0, -4.0]], requires_grad=True)
+    d = TanhNormal(mu, torch.tensor([0.85, 0.85]))
+    assert float(d.squashed_entropy()[0]) < float(d.entropy()[0]) - 2.0
+    d.squashed_entropy().sum().backward()
+    assert mu.grad[0, 0] < 0 < mu.grad[0, 1]  # ascending the bonus moves both means towards 0
+    assert not d.entropy().requires_grad  # the base entropy does not depend on the mean at all
