@@ -107,9 +107,11 @@ class Run:
         return f"{self.condition.name}/seed_{self.seed}"
 
     def fingerprint(self) -> str:
+        """A hash of what decides the run: its config's values that differ from the defaults (so a config key added
+        later with a default does not make every stored run look changed), controller, evaluation and buffer."""
         c = self.condition
-        body = [to_dict(c.run_config(self.seed)), c.controller, c.eval_episodes, c.eval_seed, c.eval_envs,
-                c.buffer and vars(c.buffer)]
+        body = [_non_defaults(to_dict(c.run_config(self.seed)), to_dict(Config())), c.controller, c.eval_episodes,
+                c.eval_seed, c.eval_envs, c.buffer and vars(c.buffer)]
         return hashlib.sha256(json.dumps(body, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
@@ -134,6 +136,19 @@ class Spec:
         """run key -> what decides that run (its resolved config, controller, evaluation, buffer): a stored run
         with another fingerprint is another run, and continuing it under this key is refused."""
         return {r.key: r.fingerprint() for r in self.runs()}
+
+
+def _non_defaults(values: dict, defaults: dict) -> dict:
+    out = {}
+    for k, v in values.items():
+        d = defaults.get(k)
+        if isinstance(v, dict) and isinstance(d, dict):
+            sub = _non_defaults(v, d)
+            if sub:
+                out[k] = sub
+        elif v != d:
+            out[k] = v
+    return out
 
 
 def parse_reference(value: Any, where: str) -> Reference:
