@@ -17,9 +17,9 @@ def fly_ppo(cfg: PPOConfig, collision: bool, frames: int = 3, device: str | torc
 
 
 def planner_ppo(cfg: PPOConfig, network: str, num_drones: int, device: str | torch.device = "cpu",
-                rnd: RNDConfig | None = None) -> PPO:
-    """PPO over a planner network (``planner.network``)."""
-    return PPO(cfg, PlannerPolicy(network, num_drones), device, rnd)
+                rnd: RNDConfig | None = None, temperature: float = 1.0) -> PPO:
+    """PPO over a planner network (``planner.network``, ``planner.temperature``)."""
+    return PPO(cfg, PlannerPolicy(network, num_drones, temperature), device, rnd)
 
 
 def make_agent(cfg: Config, device: str | torch.device = "cpu") -> Agent:
@@ -28,7 +28,8 @@ def make_agent(cfg: Config, device: str | torch.device = "cpu") -> Agent:
     if cfg.train.algo == "ppo":
         return fly_ppo(cfg.ppo, collision, frames, device, cfg.rnd)
     if cfg.train.algo == "planner":
-        return planner_ppo(cfg.ppo, cfg.planner.network, cfg.drones.num_drones, device, cfg.rnd)
+        return planner_ppo(cfg.ppo, cfg.planner.network, cfg.drones.num_drones, device, cfg.rnd,
+                           cfg.planner.temperature)
     if cfg.train.algo == "td3":
         return TD3(cfg.td3, collision, frames, device)
     return IQL(cfg.iql, collision, frames, device)

@@ -94,7 +94,8 @@ class ThesisPlannerNet(nn.Module):
     reference).
     """
 
-    def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS):
+    def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS,
+                 temperature: float = 1.0):
         super().__init__()
         self.pos_emb = nn.Linear(2, hidden)
         self.goal_emb = nn.Linear(2, hidden)
@@ -105,6 +106,7 @@ class ThesisPlannerNet(nn.Module):
         init_weights(self)
         layer_init(self.value_head, gain=1.0)
         self.register_buffer("drone_ids", torch.arange(num_drones), persistent=False)
+        self.temperature = temperature  # planner.temperature: logits / T, so p ~ weights^(1/T)
 
     @staticmethod
     def allowed(fires_mask: torch.Tensor) -> torch.Tensor:
@@ -130,7 +132,8 @@ class ThesisPlannerNet(nn.Module):
         """Per-drone logits (B, N, K) (-inf where masked) and the value (B,)."""
         weights, out, allowed = self.attend(obs)
         # the clamp keeps the log finite where a weight underflows; log_softmax renormalises after it
-        logits = weights.clamp_min(PROB_EPS).log().masked_fill(~allowed.unsqueeze(1), float("-inf"))
+        logits = (weights.clamp_min(PROB_EPS).log() / self.temperature).masked_fill(~allowed.unsqueeze(1),
+                                                                                     float("-inf"))
         return logits, self.value_head(out).squeeze(-1).mean(-1)
 
     def forward_act(self, obs: dict[str, torch.Tensor], deterministic: bool = False,
@@ -202,12 +205,14 @@ class PointerPlannerNet(nn.Module):
     (each fire at most once per decision, the groundstation any number of times, a learnable soft penalty on
     repeats) and an attention-pooled critic on the shared encoder."""
 
-    def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS):
+    def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS,
+                 temperature: float = 1.0):
         super().__init__()
         self.encoder = PlannerEncoder(num_drones, hidden, heads)
         self.query_proj = nn.Linear(hidden, hidden)
         self.key_proj = nn.Linear(hidden, hidden)
         self.log_temperature = nn.Parameter(torch.zeros(1))
+        self.temperature = temperature  # planner.temperature, on top of the learned one
         self.log_penalty = nn.Parameter(torch.tensor([1.6]))  # c = e^1.6 ~ 4.95
         self.pool_query = nn.Parameter(torch.randn(1, 1, hidden))
         self.pool_attn = nn.MultiheadAttention(hidden, heads, batch_first=True)
@@ -218,7 +223,7 @@ class PointerPlannerNet(nn.Module):
     def base_logits(self, d: torch.Tensor, fires: torch.Tensor) -> torch.Tensor:
         """(Wq d_i) . (Wk f_j) / (sqrt(H) T), shape (B, N, K)."""
         temperature = self.log_temperature.clamp(-3.0, 3.0).exp()
-        scale = math.sqrt(d.shape[-1]) * temperature
+        scale = math.sqrt(d.shape[-1]) * temperature * self.temperature
         return torch.bmm(self.query_proj(d), self.key_proj(fires).transpose(1, 2)) / scale
 
     def penalty(self) -> torch.Tensor:

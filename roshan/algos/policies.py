@@ -151,8 +151,8 @@ class PlannerPolicy:
 
     shares_encoder = True  # both planner critics read the actor's encoder (thesis Table 5.8, learning.md 3.2)
 
-    def __init__(self, network: str, num_drones: int):
-        self.net = PLANNER_NETS[network](num_drones)
+    def __init__(self, network: str, num_drones: int, temperature: float = 1.0):
+        self.net = PLANNER_NETS[network](num_drones, temperature=temperature)
         self.novelty_dim = 5 * num_drones + 5
 
     @staticmethod

@@ -108,6 +108,9 @@ class PlannerConfig(Section):
                               doc="greedy heuristic: original = a drone whose fire is on the groundstation cell "
                                   "re-takes it every step and never drops (agents.md 10.2); fixed = it drops")
     max_candidates: int = num(0, 0, doc="candidate list length K (groundstation included); 0 = every cell + 1")
+    temperature: float = num(1.0, 0.0, 10.0, lo_open=True,
+                             doc="the planner's categorical is p^(1/T), renormalised (logits / T): T < 1 sharpens "
+                                 "the sampled goals so training episodes can end in success; argmax is unchanged")
     network: str = choice("thesis", ("thesis", "pointer"), doc="the planner network: learning.md 3.1 (thesis) or "
                                                               "3.2 (pointer, newest)")
     rewards: PlannerRewardConfig = field(default_factory=PlannerRewardConfig)

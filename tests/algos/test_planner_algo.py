@@ -169,6 +169,22 @@ def test_thesis_joint_log_prob_is_the_sum_of_per_drone_categoricals():
 # ---------------------------------------------------------------------------------------------- PPO
 
 
+def test_thesis_temperature_sharpens_the_categorical_to_p_to_the_one_over_t():
+    g = torch.Generator().manual_seed(3)
+    obs = random_obs(8, 3, 12, g, n_valid=torch.full((8,), 12))
+    plain = ThesisPlannerNet(3)
+    sharp = ThesisPlannerNet(3, temperature=0.25)
+    sharp.load_state_dict(plain.state_dict())
+    with torch.no_grad():
+        p = plain.probs(obs).clamp_min(1e-8)
+        expected = torch.softmax(p.log() * 4.0 + torch.log(torch.isfinite(plain.heads(obs)[0]).float()), -1)
+        got = torch.softmax(sharp.heads(obs)[0], -1)
+        torch.testing.assert_close(got, expected, atol=1e-5, rtol=1e-4)
+        assert torch.equal(got.argmax(-1), p.argmax(-1))  # deterministic evaluation is unchanged
+        h = lambda q: -(q * q.clamp_min(1e-12).log()).sum(-1)  # noqa: E731
+        assert bool((h(got) < h(torch.softmax(plain.heads(obs)[0], -1))).all())
+
+
 def bandit_rollout(agent: PPO, obs: dict, T: int, g: torch.Generator) -> Rollout:
     """One-step episodes: reward 1 when drone 0 picks candidate 2 and drone 1 picks candidate 3."""
     E = obs["drones"].shape[0]
