@@ -91,7 +91,7 @@ def prepare_experiment(storage, spec: Spec, echo: Callable[[str], None] = print)
     except optuna.exceptions.DuplicatedStudyError:
         study = optuna.load_study(study_name=spec.name, storage=storage)
         stored = _wait_for_meta(study)
-        check_runs(spec, stored)
+        check_runs(spec, stored, study)
         study.set_user_attr(STUDY_ATTR, {"spec": spec.path, "runs": {**stored["runs"], **prints}})
     queued = {run_key(t) for t in study.get_trials(deepcopy=False) if t.state != TrialState.FAIL}
     for key in prints:
@@ -100,9 +100,11 @@ def prepare_experiment(storage, spec: Spec, echo: Callable[[str], None] = print)
     return study
 
 
-def check_runs(spec: Spec, stored: dict) -> None:
-    """Refuse a spec under which a stored run would mean something else (config, controller, evaluation)."""
-    changed = [k for k, fp in spec.fingerprints().items() if stored["runs"].get(k, fp) != fp]
+def check_runs(spec: Spec, stored: dict, study: optuna.Study) -> None:
+    """Refuse a spec under which a run that has started would mean something else (config, controller,
+    evaluation); runs still waiting may change."""
+    started = {run_key(t) for t in study.get_trials(deepcopy=False) if t.state != TrialState.WAITING}
+    changed = [k for k, fp in spec.fingerprints().items() if stored["runs"].get(k, fp) != fp and k in started]
     if changed:
         raise SpecError(f"{spec.path}: experiment {spec.name!r} holds runs made with other settings under the same "
                         f"keys ({', '.join(changed[:6])}{' ...' if len(changed) > 6 else ''}): keep their conditions "
@@ -183,7 +185,7 @@ def run_worker(spec: Spec, storage_url: str, root: str | Path, execute: Execute 
     130 when interrupted: the run is failed and queued again, and continues from its checkpoint)."""
     storage = open_storage(storage_url, heartbeat, max_retry)
     study = load_experiment(storage, spec.name)
-    check_runs(spec, study.user_attrs[STUDY_ATTR])
+    check_runs(spec, study.user_attrs[STUDY_ATTR], study)
     fail_stale(study)
     got = claim(study)
     if got is None:
