@@ -5,7 +5,9 @@ edge) and pixel column = grid column, ``cell_px`` pixels per cell:
 
 1. ``_paint_cells``: every pixel takes its cell's colour from a (state, original class) table. Class ids
    show their class colour, BURNING is (255, 0, 0), BURNED blends (42, 42, 42) with the original class colour
-   20:1 and FLOODED blends (77, 187, 230) with it 40:1. No texture noise.
+   20:1 and FLOODED blends (77, 187, 230) with it 40:1. No texture noise. Cells that water put out this
+   episode keep a blue tint once their flood has drained (``EXTINGUISHED_COLOUR``); with a detected-fire map
+   (``known_fires``) burning cells that no drone has seen are dimmed (``UNSEEN_FIRE_COLOUR``).
 2. ``_splat_particles`` (``particles=True``): each live particle of the env is alpha-blended into its own
    bounding box of pixels, in pool order (serial loop, so overlapping particles always blend the same way).
    Radius grows linearly with intensity Y from ``r0 = cell_px / 6`` (Y = 0) to ``3 r0`` (Y = 1), never below
@@ -19,7 +21,8 @@ edge) and pixel column = grid column, ``cell_px`` pixels per cell:
    above (north-up, ``[py, px]``); a point at ``(x1, x2)`` metres lies at pixel
    ``(x1 / cell_size * cell_px, x2 / cell_size * cell_px)``. :func:`drone_overlay` is such a callable: the
    drones of one env of a :class:`~roshan.kernels.drones.DroneSim` as discs, view squares and goal crosses in
-   one colour per drone id, and the groundstation cell as a white outline.
+   one colour per drone id, and the groundstation cell as a white outline (:class:`DroneOverlay` also draws a
+   second group, the planner's explorers, as white diamonds).
 4. ``_draw_wind_arrow``: a white arrow on a dark disc in the top-right corner points where the wind blows
    (wind component 1 = south = down the image, component 2 = east = right). A calm wind shows a dot.
 
@@ -32,6 +35,9 @@ Backends only differ in how the finished field leaves Taichi:
   backends give identical pixels. PNGs are written with PIL from the rendered array on both backends (RGB, and
   faster than GGUI's RGBA ``window.save_image``).
 - ``auto``: ``ggui`` if an offscreen window opens, else ``raster`` with one warning.
+
+:class:`EnvZeroFrames` (the envs' ``render()``) adds a caption band above the map and a legend band below it
+(:mod:`roshan.kernels.annotate`, PIL on the host).
 
 The offscreen GGUI window is the process's one shared window of :mod:`roshan.ggui`: renderers of the same size
 share it, and a renderer of another size replaces it.
