@@ -134,3 +134,21 @@ def test_fires_not_on_the_detected_map_are_dimmed():
                           known_fires=known).render()
     assert cell_pixel(frame, 3, 3) == (255, 0, 0)
     assert cell_pixel(frame, 3, 4) == UNSEEN_FIRE_COLOUR
+
+
+def test_single_env_renders_the_terminal_state_until_the_reset():
+    import gymnasium
+
+    env = gymnasium.make("roshan/FlyAgent-v0", config=CFG, render_mode="rgb_array")
+    env.reset(seed=3)
+    start = env.render()
+    for _ in range(env.unwrapped.vector_env.t_max):
+        _, _, terminated, truncated, _ = env.step(-np.ones((2, 2), np.float32))  # both drones fly off the map
+        if terminated or truncated:
+            break
+    assert terminated or truncated
+    end = env.render()
+    env.reset()
+    assert not np.array_equal(end, env.render()), "after the last step render() showed the next episode"
+    assert not np.array_equal(end, start)
+    env.close()
