@@ -10,7 +10,7 @@ from PIL import Image
 from roshan.config import Config, DroneConfig, IgnitionConfig, MapConfig, PlannerConfig
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.planner import PlannerVectorEnv
-from roshan.runs.evaluate import baseline_fn, run_episodes
+from roshan.runs.evaluate import baseline_fn, planner_random_fn, run_episodes
 
 MODEL = str(Path(__file__).resolve().parents[2] / "models" / "fly_simple")
 CFG = Config(map=MapConfig(name="15x15_Woods"), ignition=IgnitionConfig(fire_percentage=0.05),
@@ -25,6 +25,11 @@ def make_fly():
 def make_greedy():
     pc = PlannerConfig(fly_model=MODEL, explorer_model=MODEL, num_explorers=2)
     return PlannerVectorEnv(2, CFG, pc, evaluation=True, controller="greedy", seed=SEED)
+
+
+def make_planner():
+    pc = PlannerConfig(fly_model=MODEL, explorer_model=MODEL, num_explorers=2)
+    return PlannerVectorEnv(2, CFG, pc, evaluation=True, controller="planner", seed=SEED)
 
 
 def greedy_fly(obs):
@@ -68,7 +73,8 @@ def replay(make, actions):
     return first, final, next_first
 
 
-@pytest.mark.parametrize("make, act", [(make_fly, greedy_fly), (make_greedy, greedy_planner)], ids=["fly", "greedy"])
+@pytest.mark.parametrize("make, act", [(make_fly, greedy_fly), (make_greedy, greedy_planner),
+                                       (make_planner, planner_random_fn(SEED))], ids=["fly", "greedy", "planner"])
 def test_frames_run_from_the_reset_to_the_final_state_of_one_episode(make, act, tmp_path):
     frames, actions, record = evaluate_with_frames(make, act, tmp_path)
     first, final, next_first = replay(make, actions)
