@@ -4,6 +4,7 @@ Frames are pictures for people, made when a frame is saved, never in the trainin
 by the kernels of :mod:`roshan.kernels.render` and is left untouched here (the bands are added around it).
 """
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -76,14 +77,22 @@ def _text_width(f, text: str) -> int:
 
 
 def _wrap(parts: list[str], sep: str, f, width: int) -> list[str]:
-    """Join ``parts`` with ``sep`` into lines no wider than ``width`` px (a part too wide alone stays whole)."""
-    lines: list[str] = []
+    """Join ``parts`` with ``sep`` into lines no wider than ``width`` px (a part too wide alone stays whole).
+
+    Widths are measured with every number widened to at least six digits, so the line breaks (and the frame's
+    height) stay the same while the numbers of a caption grow: every frame of a GIF has one size.
+    """
+    lines: list[list[str]] = []
     for part in parts:
-        if lines and _text_width(f, lines[-1] + sep + part) <= width:
-            lines[-1] += sep + part
+        if lines and _text_width(f, _widest(sep.join([*lines[-1], part]))) <= width:
+            lines[-1].append(part)
         else:
-            lines.append(part)
-    return lines or [""]
+            lines.append([part])
+    return [sep.join(line) for line in lines] or [""]
+
+
+def _widest(text: str) -> str:
+    return re.sub(r"\d+", lambda m: "8" * max(6, len(m.group())), text)
 
 
 def _item_width(item: LegendItem, f) -> int:

@@ -152,3 +152,10 @@ def test_single_env_renders_the_terminal_state_until_the_reset():
     assert not np.array_equal(end, env.render()), "after the last step render() showed the next episode"
     assert not np.array_equal(end, start)
     env.close()
+
+
+def test_caption_line_breaks_do_not_depend_on_the_numbers():
+    frame = np.zeros((40, 300, 3), np.uint8)
+    short = annotate.annotate(frame, "FlyAgent model x | episode 0 | step 0 | t = 0.0 s | fires left 3", [])
+    long = annotate.annotate(frame, "FlyAgent model x | episode 12 | step 12345 | t = 1234.5 s | fires left 300", [])
+    assert short.shape == long.shape  # every frame of a GIF has the same size
