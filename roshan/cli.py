@@ -246,6 +246,37 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, frames_dir
     click.echo(f"files: {summary['out_dir']}")
 
 
+@main.command()
+@click.argument("target", type=click.Path(exists=True))
+@click.option("--steps", type=click.IntRange(min=1), default=None,
+              help="Env steps to run (planner: decisions); default: until the window is closed, or without a "
+                   "display env 0's first episode.")
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Env seed (fire layouts).")
+@click.option("--checkpoint", "which", default="best",
+              type=click.Choice(["best", "best_eval", "best_objective", "best_reward", "latest"]), show_default=True)
+@click.option("--fps", type=click.FloatRange(min=0.1), default=10.0, show_default=True,
+              help="Frames a second, at most.")
+@click.option("--gif", "gif_path", type=click.Path(dir_okay=False), default="watch.gif", show_default=True,
+              help="Where the frames go when no window can be shown.")
+@click.option("--screenshot", type=click.Path(dir_okay=False), default=None,
+              help="With a window and --steps: save the window's last frame as this PNG.")
+@SETS
+@ARCH
+@THREADS
+def watch(target, steps, seed, which, fps, gif_path, screenshot, sets, arch, threads):
+    """Watch a trained FlyAgent or planner (a run folder or checkpoint) fly, live in a window (like RL-Zoo's
+    enjoy); without a display, env 0's first episode is written as a GIF instead."""
+    from roshan.runs.watch import watch as run_watch
+    from roshan.runtime import init_taichi
+
+    try:
+        init_taichi(arch or "cpu", threads)
+        click.echo(run_watch(target, steps=steps, seed=seed, which=which, fps=fps, gif_path=Path(gif_path),
+                             screenshot=Path(screenshot) if screenshot else None, overrides=sets))
+    except (ConfigError, MapError, ValueError, OSError) as exc:
+        _fail(exc)
+
+
 # ------------------------------------------------------------------------------------------------ study
 
 

@@ -54,3 +54,15 @@ def ggui_available() -> bool:
         return True
     except Exception:  # any failure to open a window means no usable GGUI here
         return False
+
+
+def open_shown_window(res: tuple[int, int], title: str = WINDOW_TITLE):
+    """A visible GGUI window of ``res = (width, height)`` (``roshan watch``); raises where none can open.
+
+    The shared offscreen window is closed first when nobody uses it (two live windows crash Taichi 1.7).
+    """
+    if _shared["window"] is not None:
+        if _shared["users"] > 0:
+            raise RuntimeError("an offscreen GGUI window is in use; close its renderers before opening a shown one")
+        _close_window()
+    return ti.ui.Window(title, tuple(res), show_window=True, vsync=False)

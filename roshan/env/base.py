@@ -41,6 +41,7 @@ class VectorEnvCore(gym.vector.VectorEnv):
     # (roshan.algos.networks.flatten_drones); False: actions are one decision per env, (E, N) indices.
     flat_drones = True
     failure_reasons = ("collision", "boundary", "timeout")  # the failures an episode record can hold
+    default_caption_name = "FlyAgent"  # who flies, in the caption of rendered frames (caption_name)
 
     def __init__(self, num_envs: int, config: Config | None, seed: int | None, render_mode: str | None):
         ensure_taichi()
@@ -57,6 +58,10 @@ class VectorEnvCore(gym.vector.VectorEnv):
         self.fire, self.drones, self.kernels, self._viewer = sims.fire, sims.drones, sims.kernels, sims.viewer
         self.t_max = sims.t_max
         self._has_reset = False
+        # Frames: the caption's controller name, and env 0's last frame of an episode (see keep_final_frame).
+        self.caption_name = self.default_caption_name
+        self.keep_final_frame = False
+        self.final_frame: np.ndarray | None = None
 
     # ------------------------------------------------------------------------------------------ construction
 
@@ -123,6 +128,8 @@ class VectorEnvCore(gym.vector.VectorEnv):
         if not self._has_reset:
             raise gym.error.ResetNeeded(f"{type(self).__name__}.step() before reset(): call reset() first")
         self._advance(actions)
+        if self.keep_final_frame:  # frames only (a host read): env 0's final state, before the autoreset below
+            self.final_frame = self.render() if bool(self._dones[0].any()) else None
         # On the CPU, reading the done flags costs microseconds and saves the reset launch (~150 us) in the
         # many steps where no episode ends; on a GPU that read would synchronise, so always launch.
         if self.device.type != "cpu" or bool(self._dones.any()):
@@ -146,9 +153,24 @@ class VectorEnvCore(gym.vector.VectorEnv):
         return actions
 
     def render(self):
-        """An RGB frame (H, W, 3) uint8 of env 0: land cover, fire, particles, drones, goals, groundstation."""
+        """An RGB frame (H, W, 3) uint8 of env 0: land cover, fire, particles, drones, goals, groundstation (the
+        planner adds its explorers and dims the fires no drone has seen), with a caption band above the map
+        (:meth:`caption`) and a legend band below it.
+
+        Rendering happens after the same-step autoreset, so on a step where env 0's episode ended this shows the
+        next episode's first state; set :attr:`keep_final_frame` to have :meth:`step` render env 0's final
+        state into :attr:`final_frame` before it resets (None on steps where env 0 did not end).
+        """
         self._check_runtime("render()")
-        return self._viewer.render()
+        return self._viewer.render(self.caption())
+
+    def caption(self) -> str:
+        """Env 0's caption: who flies, the episode index (as in episodes.csv), physics steps and simulated time
+        since the reset, and the cells burning now."""
+        steps = int(self.kernels.steps[0])
+        burning = int(self.fire.stats()["burning"][0])
+        return (f"{self.caption_name} | episode {int(self.fire.episode[0])} | step {steps} | "
+                f"t = {steps * self.config.fire.dt:.1f} s | fires left {burning}")
 
     def close(self, **kwargs):
         """Give the simulators back to the pool (idempotent); the env must not be stepped afterwards."""

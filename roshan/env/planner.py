@@ -55,6 +55,7 @@ class PlannerVectorEnv(VectorEnvCore):
             raise ValueError(f"controller must be one of {', '.join(CONTROLLERS)}, got {controller!r}")
         self.planner_config = pc = planner or PlannerConfig()
         self.controller, self.evaluation = controller, evaluation
+        self.default_caption_name = controller
         ensure_taichi()  # the frozen policies act on the simulator's torch device
         self.fly_policy = fly_policy or FrozenFlyPolicy(pc.fly_model, torch_device())
         self.explorer_policy = None

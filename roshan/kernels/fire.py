@@ -33,6 +33,7 @@ TIMER_FIELDS = 5
 FLAG_EXPOSED = 1  # the cell is in the exposed ("ticking") list
 FLAG_BURNED_DOWN = 2  # burned out completely once (a flood returns it to BURNED)
 FLAG_DRAWN = 4  # this episode's durations, periods and exposure/burn timers are set (see _draw_durations)
+FLAG_EXTINGUISHED = 8  # water put this cell out while it burned, this episode (read by rendering only)
 NEVER = -1.0  # tau_ign of cells that cannot ignite (the reference skips their exposure)
 
 # Per-env counters (E, N_COUNTS): list lengths, statistics and the update count since the last reset.
@@ -348,6 +349,11 @@ class FireSim:
         return self.cells[e, c][C_STATE]
 
     @ti.func
+    def was_extinguished(self, e, c) -> ti.i32:
+        """1 if water put cell c out while it was burning, earlier in this episode."""
+        return ti.cast((self.cells[e, c][C_FLAGS] & FLAG_EXTINGUISHED) != 0, ti.i32)
+
+    @ti.func
     def can_ignite(self, e, c) -> ti.i32:
         """1 if cell c's current state can catch fire."""
         return self.cls_ignitable[self.cells[e, c][C_STATE]]
@@ -656,6 +662,7 @@ class FireSim:
             _remove_from_list(self.burning, self.counts, e, N_BURNING, c)
             self.timers[e, c][T_EXPOSURE] = 0.0
             self.counts[e, N_EXTINGUISHED] += 1
+            self.cells[e, c][C_FLAGS] |= FLAG_EXTINGUISHED
         elif (self.cells[e, c][C_FLAGS] & FLAG_EXPOSED) != 0:
             _remove_from_list(self.exposed, self.counts, e, N_EXPOSED, c)
             self.cells[e, c][C_FLAGS] = self.cells[e, c][C_FLAGS] & ~FLAG_EXPOSED

@@ -5,7 +5,9 @@ edge) and pixel column = grid column, ``cell_px`` pixels per cell:
 
 1. ``_paint_cells``: every pixel takes its cell's colour from a (state, original class) table. Class ids
    show their class colour, BURNING is (255, 0, 0), BURNED blends (42, 42, 42) with the original class colour
-   20:1 and FLOODED blends (77, 187, 230) with it 40:1. No texture noise.
+   20:1 and FLOODED blends (77, 187, 230) with it 40:1. No texture noise. Cells that water put out this
+   episode keep a blue tint once their flood has drained (``EXTINGUISHED_COLOUR``); with a detected-fire map
+   (``known_fires``) burning cells that no drone has seen are dimmed (``UNSEEN_FIRE_COLOUR``).
 2. ``_splat_particles`` (``particles=True``): each live particle of the env is alpha-blended into its own
    bounding box of pixels, in pool order (serial loop, so overlapping particles always blend the same way).
    Radius grows linearly with intensity Y from ``r0 = cell_px / 6`` (Y = 0) to ``3 r0`` (Y = 1), never below
@@ -19,7 +21,8 @@ edge) and pixel column = grid column, ``cell_px`` pixels per cell:
    above (north-up, ``[py, px]``); a point at ``(x1, x2)`` metres lies at pixel
    ``(x1 / cell_size * cell_px, x2 / cell_size * cell_px)``. :func:`drone_overlay` is such a callable: the
    drones of one env of a :class:`~roshan.kernels.drones.DroneSim` as discs, view squares and goal crosses in
-   one colour per drone id, and the groundstation cell as a white outline.
+   one colour per drone id, and the groundstation cell as a white outline (:class:`DroneOverlay` also draws a
+   second group, the planner's explorers, as white diamonds).
 4. ``_draw_wind_arrow``: a white arrow on a dark disc in the top-right corner points where the wind blows
    (wind component 1 = south = down the image, component 2 = east = right). A calm wind shows a dot.
 
@@ -32,6 +35,9 @@ Backends only differ in how the finished field leaves Taichi:
   backends give identical pixels. PNGs are written with PIL from the rendered array on both backends (RGB, and
   faster than GGUI's RGBA ``window.save_image``).
 - ``auto``: ``ggui`` if an offscreen window opens, else ``raster`` with one warning.
+
+:class:`EnvZeroFrames` (the envs' ``render()``) adds a caption band above the map and a legend band below it
+(:mod:`roshan.kernels.annotate`, PIL on the host).
 
 The offscreen GGUI window is the process's one shared window of :mod:`roshan.ggui`: renderers of the same size
 share it, and a renderer of another size replaces it.
@@ -48,8 +54,9 @@ import taichi as ti
 from PIL import Image
 
 from roshan.ggui import acquire_window, release_window
+from roshan.kernels.annotate import LegendItem, annotate
 from roshan.kernels.particles import P_X1, P_X2, P_Y, R_Y, radiation_position
-from roshan.maps import BURNED, CLASSES, FLOODED
+from roshan.maps import BURNED, BURNING, CLASSES, FLOODED
 
 BACKENDS = ("auto", "ggui", "raster")
 TARGET_LONG_SIDE_PX = 720  # default frame size: the longer side of the map is about this many pixels
@@ -58,6 +65,12 @@ MIN_RADIUS_PX = 0.75  # > sqrt(2)/2: some pixel centre always lies inside the pa
 BURNED_WEIGHT, FLOODED_WEIGHT = 20, 40  # state colour : original class colour (firespin.md 13)
 ARROW_BACKDROP = (21, 19, 51)  # the reference's background colour, behind the wind arrow
 ARROW_BACKDROP_ALPHA = 0.65
+# Burning cells that no drone has seen yet (frames with a detected-fire map): a dim, greyed red, so the fires the
+# planner knows of (bright red) stand out from those it cannot know of.
+UNSEEN_FIRE_COLOUR = (150, 75, 75)
+# Cells that water put out keep a blue tint for the rest of the episode (a flood returns them to their class
+# colour, which would hide where the drones worked).
+EXTINGUISHED_COLOUR, EXTINGUISHED_ALPHA = (20, 50, 255), 0.7
 NO_GGUI_HINT = ("GGUI/Vulkan is unavailable, so frames are rendered with the raster fallback (numpy/PIL). "
                 "For GGUI install a Vulkan driver, e.g. `apt-get install -y mesa-vulkan-drivers` (Debian).")
 
@@ -119,10 +132,13 @@ class FrameRenderer:
         backend: ``"auto"``, ``"ggui"`` or ``"raster"`` (see the module docstring). The GGUI window is opened
             at the first frame, or when :attr:`backend` is read.
         wind_arrow: draw the wind arrow in the top-right corner.
+        known_fires: optional (E, rows, cols) field of the cells some drone has seen burning (nonzero), e.g.
+            :attr:`roshan.kernels.explore.ExploreMaps.fire_map`: burning cells not on it are drawn dimmed
+            (:data:`UNSEEN_FIRE_COLOUR`).
     """
 
     def __init__(self, sim, env: int = 0, cell_px: int | None = None, particles: bool = True,
-                 backend: str = "auto", wind_arrow: bool = True):
+                 backend: str = "auto", wind_arrow: bool = True, known_fires=None):
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
         self.sim = sim
@@ -132,6 +148,8 @@ class FrameRenderer:
             raise ValueError(f"cell_px must be >= 1, got {cell_px}")
         self.particles = particles
         self.wind_arrow = wind_arrow
+        self.known_fires = known_fires
+        self.has_known_fires = known_fires is not None  # (Taichi scope cannot test `is not None`)
         self._backend = backend
         self._window = None
         self.height, self.width = sim.rows * self.cell_px, sim.cols * self.cell_px
@@ -242,9 +260,17 @@ class FrameRenderer:
     @ti.kernel
     def _paint_cells(self, env: ti.i32):
         cp = self.cell_px
+        ext = ti.Vector(EXTINGUISHED_COLOUR, ti.f32)
         for py, px in self.image:
             c = (py // cp) * self.sim.cols + px // cp
-            self.image[py, px] = self.colours[self.sim.cell_state(env, c), self.sim.land[c]]
+            state = self.sim.cell_state(env, c)
+            colour = self.colours[state, self.sim.land[c]]
+            if ti.static(self.has_known_fires):
+                if state == BURNING and self.known_fires[env, py // cp, px // cp] == 0:
+                    colour = ti.Vector(UNSEEN_FIRE_COLOUR, ti.u8)
+            if state != BURNING and state != FLOODED and self.sim.was_extinguished(env, c) != 0:
+                colour = blend(colour, ext, EXTINGUISHED_ALPHA)
+            self.image[py, px] = colour
 
     @ti.kernel
     def _splat_particles(self, env: ti.i32):
@@ -313,12 +339,14 @@ class FrameRenderer:
 
 # ---------------------------------------------------------------------------------------------- drones
 
-# Drone colours by id: saturated blues, purples and pinks, none of them a land-cover class colour nor in the
-# fire palette (reds, oranges, yellows), nor white (the groundstation).
-DRONE_PALETTE = ((255, 0, 255), (0, 191, 255), (148, 0, 211), (255, 105, 180), (0, 0, 160), (0, 128, 128),
-                 (186, 85, 211), (65, 105, 225))
-DRONE_RIM = (0, 0, 0)  # one-pixel dark rim so discs stand out on any land colour
+# Drone colours by id: four far-apart hues first (magenta, sky blue, navy, violet; planner runs have four drones),
+# none of them a land-cover class colour nor in the fire palette (reds, oranges, yellows), nor white (the
+# groundstation and the explorers).
+DRONE_PALETTE = ((255, 0, 255), (0, 191, 255), (0, 0, 160), (148, 0, 211), (0, 128, 128), (255, 105, 180),
+                 (65, 105, 225), (186, 85, 211))
+DRONE_RIM = (0, 0, 0)  # one-pixel dark rim so discs, crosses and explorers stand out on any land colour
 GROUNDSTATION_COLOUR = (255, 255, 255)
+EXPLORER_COLOUR = (255, 255, 255)  # explorers: white diamonds with a dark rim (planner drones are discs)
 MIN_DRONE_RADIUS_PX = 3.0
 
 
@@ -332,6 +360,14 @@ def drone_colours(n: int) -> np.ndarray:
         hue = (0.55 + 0.618034 * (i - len(DRONE_PALETTE))) % 1.0
         out.append(tuple(round(255 * c) for c in colorsys.hsv_to_rgb(hue, 0.55 + 0.4 * (i % 2), 1.0)))
     return np.asarray(out, np.uint8).reshape(n, 3)
+
+
+def mark_sizes(cell_px: int) -> dict[str, float]:
+    """Pixel sizes of the drone marks at ``cell_px``: view-square line, goal-cross half thickness and arm,
+    explorer diamond radius (shared by the kernels and the legend)."""
+    line = max(2, cell_px // 8)
+    return {"line": line, "cross_half": line, "arm": max(5.0, 0.45 * cell_px),
+            "explorer": max(4.0, 0.4 * cell_px)}
 
 
 @ti.func
@@ -350,20 +386,31 @@ def _outline(image: ti.template(), r0, r1, c0, c1, t, colour):
     _fill_rect(image, r0, r1, ti.max(c1 - t, c0), c1, colour)
 
 
+@ti.func
+def _cross(image: ti.template(), gy, gx, h, lo, hi, colour):
+    """A plus sign centred on pixel (gy, gx): bars ``2 h`` pixels thick from ``lo`` to ``hi`` (exclusive)."""
+    _fill_rect(image, gy - h, gy + h, gx + lo, gx + hi, colour)
+    _fill_rect(image, gy + lo, gy + hi, gx - h, gx + h, colour)
+
+
 @ti.data_oriented
 class DroneOverlay:
     """An ``overlay(image, cell_px)`` for :meth:`FrameRenderer.render` drawing the drones of env ``env``.
 
-    Per drone, in its colour (:func:`drone_colours`, by id): the view square (outline, ``view_range`` cells
-    wide, centred on the drone), the goal (a cross) and the drone (a filled disc with a dark rim, radius
-    ``max(3 px, drone_size / cell_size * cell_px)``); the groundstation cell gets a white outline. Layers go
-    groundstation, view squares, goals, discs, so drones are never hidden; within a layer drones are drawn in
-    id order by a serial loop, so overlapping marks always come out the same. Positions are read from the
-    DroneSim's fields at each call (north up like the cells: metres along rows go down the image).
+    Per drone, in its colour (:func:`drone_colours`, by id): the view square (a 2+ pixel outline, ``view_range``
+    cells wide, centred on the drone), the goal (a cross with a dark rim) and the drone (a filled disc with a
+    dark rim, radius ``max(3 px, drone_size / cell_size * cell_px, 0.3 cell_px)``); the groundstation cell gets
+    a white outline. With ``explorers`` (a second DroneSim of the same envs, e.g. the planner's ExploreAgents)
+    each explorer is a white diamond with a dark rim. Layers go groundstation, explorers, view squares, goals,
+    discs, so drones are never hidden; within a layer drones are drawn in id order by a serial loop, so
+    overlapping marks always come out the same. Positions are read from the DroneSims' fields at each call
+    (north up like the cells: metres along rows go down the image). Sizes come from :func:`mark_sizes`.
     """
 
-    def __init__(self, drones, env: int = 0):
+    def __init__(self, drones, env: int = 0, explorers=None):
         self.drones = drones
+        self.explorers = explorers
+        self.has_explorers = explorers is not None
         self.env = env
         self.palette = ti.Vector.field(3, ti.u8, drones.num_drones)
         self.palette.from_numpy(drone_colours(drones.num_drones))
@@ -379,20 +426,37 @@ class DroneOverlay:
     def __call__(self, image, cell_px: int) -> None:
         if tuple(image.shape) != (self.drones.rows * cell_px, self.drones.cols * cell_px):
             raise ValueError(f"image {tuple(image.shape)} does not match the drones' map at {cell_px} px per cell")
-        self._draw(image, self.env, int(cell_px))
+        size = mark_sizes(int(cell_px))
+        self._draw(image, self.env, int(cell_px), int(size["line"]), int(size["cross_half"]), float(size["arm"]),
+                   float(size["explorer"]))
 
     @ti.kernel
-    def _draw(self, image: ti.template(), env: ti.i32, cell_px: ti.i32):
+    def _draw(self, image: ti.template(), env: ti.i32, cell_px: ti.i32, line: ti.i32, h: ti.i32, arm: ti.f32,
+              diamond: ti.f32):
         dr = self.drones
         px_per_m = ti.cast(cell_px, ti.f32) / dr.cell
-        thick = ti.max(1, cell_px // 8)
-        line = ti.max(1, cell_px // 12)
+        thick = ti.max(2, cell_px // 8)
         half_view = dr.half_view * cell_px
-        arm = ti.max(3.0, 0.3 * cell_px)
-        radius = ti.max(MIN_DRONE_RADIUS_PX, dr.cfg.drone_size * px_per_m)
+        radius = ti.max(MIN_DRONE_RADIUS_PX, dr.cfg.drone_size * px_per_m, 0.3 * cell_px)
         rim = ti.Vector(DRONE_RIM, ti.u8)
         gs = dr.groundstation[env] * cell_px
         _outline(image, gs[0], gs[0] + cell_px, gs[1], gs[1] + cell_px, thick, ti.Vector(GROUNDSTATION_COLOUR, ti.u8))
+        if ti.static(self.has_explorers):
+            ex = self.explorers
+            white = ti.Vector(EXPLORER_COLOUR, ti.u8)
+            ti.loop_config(serialize=True)
+            for x in range(ex.num_drones):
+                c = ex.pos[env, x] * px_per_m
+                outer = diamond + 1.5
+                for py, px in ti.ndrange((ti.max(0, ti.floor(c[0] - outer, ti.i32)),
+                                          ti.min(image.shape[0], ti.ceil(c[0] + outer, ti.i32))),
+                                         (ti.max(0, ti.floor(c[1] - outer, ti.i32)),
+                                          ti.min(image.shape[1], ti.ceil(c[1] + outer, ti.i32)))):
+                    d1 = ti.abs(py + 0.5 - c[0]) + ti.abs(px + 0.5 - c[1])  # L1 distance: a diamond
+                    if d1 <= diamond:
+                        image[py, px] = white
+                    elif d1 <= outer:
+                        image[py, px] = rim
         ti.loop_config(serialize=True)
         for d in range(dr.num_drones):
             c = dr.pos[env, d] * px_per_m
@@ -403,9 +467,8 @@ class DroneOverlay:
             g = dr.goal[env, d] * cell_px  # grid units -> pixels
             gy, gx = ti.floor(g[0], ti.i32), ti.floor(g[1], ti.i32)
             lo, hi = ti.floor(-arm, ti.i32), ti.ceil(arm, ti.i32) + 1
-            h = line // 2 + 1  # the cross is one step thicker than the view outline
-            _fill_rect(image, gy - h, gy + h, gx + lo, gx + hi, self.palette[d])
-            _fill_rect(image, gy + lo, gy + hi, gx - h, gx + h, self.palette[d])
+            _cross(image, gy, gx, h + 1, lo - 1, hi + 1, rim)
+            _cross(image, gy, gx, h, lo, hi, self.palette[d])
         ti.loop_config(serialize=True)
         for d in range(dr.num_drones):
             c = dr.pos[env, d] * px_per_m
@@ -437,18 +500,55 @@ def _env_index(env: int, num_envs: int) -> int:
 
 class EnvZeroFrames:
     """``render()`` of the vector envs: env 0's land cover, fire and drones through the raster backend, built on
-    the first call (rendering is optional, and the renderer compiles kernels)."""
+    the first call (rendering is optional, and the renderer compiles kernels).
 
-    def __init__(self, drones):
+    Args:
+        drones: the drone group whose drones, view squares and goals are drawn (its FireSim is the map).
+        explorers: the planner's explorer group, drawn as white diamonds (or None).
+        known_fires: the detected-fire map (``ExploreMaps.fire_map``): burning cells no drone has seen are
+            dimmed (or None: every burning cell is bright).
+    """
+
+    def __init__(self, drones, explorers=None, known_fires=None):
         self.drones = drones
+        self.explorers = explorers
+        self.known_fires = known_fires
         self._renderer: FrameRenderer | None = None
         self._overlay: DroneOverlay | None = None
 
-    def render(self) -> np.ndarray:
+    def render(self, caption: str | None = None) -> np.ndarray:
+        """Env 0's map (H, W, 3) uint8; with ``caption``, a caption band above it and the legend below."""
         if self._renderer is None:
-            self._renderer = FrameRenderer(self.drones.fire, backend="raster")
-            self._overlay = drone_overlay(self.drones)
-        return self._renderer.render(overlay=self._overlay)
+            self._renderer = FrameRenderer(self.drones.fire, backend="raster", known_fires=self.known_fires)
+            self._overlay = DroneOverlay(self.drones, 0, explorers=self.explorers)
+        frame = self._renderer.render(overlay=self._overlay)
+        if caption is None:
+            return frame
+        return annotate(frame, caption, self.legend())
+
+    def legend(self) -> list[LegendItem]:
+        """What the marks and colours of this env's frames mean."""
+        colours = [tuple(int(v) for v in c) for c in drone_colours(self.drones.num_drones)]
+        items = [LegendItem("disc", c, f"drone {d}") for d, c in enumerate(colours[:8])]
+        if len(colours) > 8:
+            items.append(LegendItem("disc", colours[8], f"drones 8-{len(colours) - 1}"))
+        items += [LegendItem("square", colours[0], "its view"), LegendItem("cross", colours[0], "its goal")]
+        if self.explorers is not None:
+            items.append(LegendItem("diamond", EXPLORER_COLOUR, "explorer"))
+        items.append(LegendItem("square", GROUNDSTATION_COLOUR, "groundstation"))
+        table = cell_colours()
+        burning = tuple(int(v) for v in table[BURNING, 0])
+        if self.known_fires is not None:
+            items += [LegendItem("cell", burning, "fire, seen"), LegendItem("cell", UNSEEN_FIRE_COLOUR, "fire, unseen")]
+        else:
+            items.append(LegendItem("cell", burning, "fire"))
+        forest = np.array(CLASSES[2].colour, np.float64)
+        tint = np.rint(forest + EXTINGUISHED_ALPHA * (np.array(EXTINGUISHED_COLOUR) - forest)).astype(int)
+        items += [LegendItem("cell", tuple(int(v) for v in tint), "put out"),
+                  LegendItem("cell", tuple(int(v) for v in table[FLOODED, 2]), "flooded"),
+                  LegendItem("cell", tuple(int(v) for v in table[BURNED, 2]), "burned"),
+                  LegendItem("particle", (255, 200, 0), "fire particle")]
+        return items
 
     def close(self) -> None:
         """Release the window claim but keep the renderer: its fields and kernels are reused when the env's

@@ -39,6 +39,8 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
 
     Returns a dict of arrays: reward, time, success, reason (str), burned, extinguished, env, index.
     ``on_step(obs, actions, rewards, terms, truncs, info)`` is called after every step (buffer recording).
+    With ``frames_dir`` the frames of env 0's first episode are written there: frame 0 is the state right after
+    the reset and the last frame the episode's final state (rendered before the same-step autoreset).
     """
     E, N = env.num_envs, env.num_drones
     quota = math.ceil(episodes / E)
@@ -46,6 +48,10 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
     done_count = torch.zeros(E, dtype=torch.long)
     rows: list[list] = [[] for _ in range(E)]
     frame = 0
+    if frames_dir is not None:
+        env.keep_final_frame = True
+        _save_frame(env.render(), frames_dir, frame)
+        frame += 1
     bar = tqdm(total=quota * E, unit="episode", disable=not progress_bar, desc="eval")
     flat = env.flat_drones  # FlyAgent policies see drones as a batch
     while int(done_count.min()) < quota:
@@ -53,10 +59,12 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
         obs, rewards, terms, truncs, info = env.step(actions)
         if on_step is not None:
             on_step(obs, actions, rewards, terms, truncs, info)
-        if frames_dir is not None and int(done_count[0]) == 0:
-            _save_frame(env, frames_dir, frame)
-            frame += 1
         ended = info["_episode_stats"]
+        if frames_dir is not None and int(done_count[0]) == 0:
+            env_zero_ended = bool(ended[0])
+            _save_frame(env.final_frame if env_zero_ended else env.render(), frames_dir, frame)
+            frame += 1
+            env.keep_final_frame = not env_zero_ended
         if bool(ended.any()):
             stats = torch.stack([info["episode_stats"][k] for k in EPISODE_FIELDS], dim=-1).cpu().numpy()
             for e in ended.nonzero().flatten().tolist():
@@ -65,6 +73,7 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
                     done_count[e] += 1
                     bar.update(1)
     bar.close()
+    env.keep_final_frame = False
     kept = [(e, i, r) for e in range(E) for i, r in enumerate(rows[e])][:episodes]
     col = lambda name: np.array([r[EPISODE_FIELDS.index(name)] for _, _, r in kept])  # noqa: E731
     return {"reward": col("return"), "time": col("steps").astype(int), "success": col("success").astype(int),
@@ -73,11 +82,11 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
             "index": np.array([i for _, i, _ in kept])}
 
 
-def _save_frame(env: FlyVectorEnv, frames_dir: Path, k: int) -> None:
+def _save_frame(picture: np.ndarray, frames_dir: Path, k: int) -> None:
     from PIL import Image
 
     frames_dir.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(env.render()).save(frames_dir / f"frame_{k:05d}.png")
+    Image.fromarray(picture).save(frames_dir / f"frame_{k:05d}.png")
 
 
 BASELINES = ("random", "greedy")
@@ -163,6 +172,7 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
     prepare_outputs(out, json_path, frames_dir, gif_path)
     E = max(1, min(num_envs or cfg.train.eval_envs, episodes))
     env = make_env(cfg, E, seed, evaluation=True)
+    env.caption_name = f"{env.default_caption_name} model {run_dir.name}"
     scratch = None
     if gif_path is not None and frames_dir is None:  # frames only for the GIF: a scratch folder, removed after
         scratch = tempfile.TemporaryDirectory(prefix="roshan_frames_")

@@ -1,0 +1,161 @@
+"""What a frame shows (issue 15): the planner's explorers, the detected-fire map, cells put out by water, and the
+caption and legend bands around the map."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import taichi as ti
+
+from roshan.config import Config, DroneConfig, IgnitionConfig, MapConfig, PlannerConfig
+from roshan.env.fly import FlyVectorEnv
+from roshan.env.planner import PlannerVectorEnv
+from roshan.kernels import annotate
+from roshan.kernels.fire import FireSim
+from roshan.kernels.render import (
+    EXPLORER_COLOUR,
+    EXTINGUISHED_ALPHA,
+    EXTINGUISHED_COLOUR,
+    UNSEEN_FIRE_COLOUR,
+    FrameRenderer,
+    cell_colours,
+)
+from roshan.maps import BURNING, load_map
+from roshan.runtime import init_taichi
+
+MODEL = str(Path(__file__).resolve().parents[2] / "models" / "fly_simple")
+CFG = Config(map=MapConfig(name="15x15_Woods"), ignition=IgnitionConfig(fire_percentage=0.05),
+             drones=DroneConfig(num_drones=2))
+CELL_PX = 10
+
+
+@pytest.fixture(scope="module")
+def planner_env():
+    """A greedy planner env in evaluation (its explorers fly), 10 decisions after a seeded reset."""
+    pc = PlannerConfig(fly_model=MODEL, explorer_model=MODEL, num_explorers=3)
+    env = PlannerVectorEnv(1, CFG, pc, evaluation=True, controller="greedy", seed=2)
+    env.reset(seed=2)
+    for _ in range(10):
+        env.step(np.zeros((1, 2), np.int64))
+    yield env
+    env.close()
+
+
+def test_planner_frame_draws_every_explorer_where_it_flies(planner_env):
+    env = planner_env
+    frame = env._viewer.render()  # the map alone
+    cell_px = frame.shape[0] // env.fire.rows
+    px_per_m = cell_px / env.fire.cell_size
+    drones = env.drones.pos.to_numpy()[0] * px_per_m
+    explorers = env.explorers.pos.to_numpy()[0] * px_per_m
+    assert len(explorers) == 3
+    for y, x in explorers:
+        if np.min(np.hypot(*(drones - (y, x)).T)) < cell_px:  # a planner drone's disc is drawn on top
+            continue
+        py, px = min(int(y), frame.shape[0] - 1), min(int(x), frame.shape[1] - 1)  # waypoints may lie on the edge
+        assert tuple(frame[py, px]) == EXPLORER_COLOUR, f"no explorer drawn at pixel {(y, x)}"
+
+
+def test_planner_frame_has_a_caption_above_and_a_legend_below_the_map(planner_env):
+    env = planner_env
+    bare = env._viewer.render()
+    framed = env.render()
+    assert framed.shape[1] == bare.shape[1] and framed.shape[0] > bare.shape[0]
+    rows = [t for t in range(framed.shape[0] - bare.shape[0] + 1)
+            if np.array_equal(framed[t:t + bare.shape[0]], bare)]
+    assert len(rows) == 1, "the map must appear unchanged between the bands"
+    top = rows[0]
+    caption, legend = framed[:top], framed[top + bare.shape[0]:]
+    assert top > 0 and legend.shape[0] > 0
+    for band in (caption, legend):
+        drawn = np.any(band != annotate.BAND_COLOUR, axis=-1)
+        assert drawn.mean() > 0.02, "the band holds no text"
+    labels = [item.label for item in env._viewer.legend()]
+    assert {"drone 0", "drone 1", "explorer", "fire, seen", "fire, unseen", "put out", "groundstation"} <= set(labels)
+    assert "greedy" in env.caption() and "episode 0" in env.caption() and "step 50" in env.caption()
+    env.caption_name = "someone else"  # the caption band changes with the caption
+    assert not np.array_equal(env.render()[:top], caption)
+    env.caption_name = env.default_caption_name
+
+
+def test_fly_frame_legend_has_no_explorers_nor_unseen_fires():
+    env = FlyVectorEnv(num_envs=1, config=CFG, seed=1)
+    env.reset(seed=1)
+    labels = [item.label for item in env._viewer.legend()]
+    assert "explorer" not in labels and "fire, unseen" not in labels and "fire" in labels
+    assert env.caption().startswith("FlyAgent | episode 0 | step 0 | t = 0.0 s | fires left ")
+    env.close()
+
+
+@pytest.fixture(scope="module")
+def sim():
+    """1 env of 35x36_Woods, no random fires; cells (5, 5) and (5, 6) burning for 10 s."""
+    init_taichi("cpu")
+    s = FireSim(load_map("35x36_Woods"), ignition=IgnitionConfig(fire_percentage=0.0), num_envs=1, seed=1)
+    s.reset()
+    mask = np.zeros((1, s.rows, s.cols), np.int32)
+    mask[0, 5, 5:7] = 1
+    s.ignite_cells(mask.reshape(1, -1))
+    s.step(100)
+    return s
+
+
+def cell_pixel(frame, i, j):
+    return tuple(int(v) for v in frame[i * CELL_PX + CELL_PX // 2, j * CELL_PX + CELL_PX // 2])
+
+
+def test_extinguished_cells_keep_a_blue_tint_after_the_flood(sim):
+    land = sim.land.to_numpy().reshape(sim.rows, sim.cols)
+    out = np.zeros((1, 1), np.int32)
+    sim.flood(np.array([[5 * sim.cols + 5]], np.int32), out)
+    assert out[0, 0] == 1
+    sim.step(int(round(2 * sim.fire_cfg.flood_duration / sim.fire_cfg.dt)))  # the flood has drained
+    assert sim.state(0)[5, 5] == land[5, 5]  # back to its class: only the tint tells it was put out
+    frame = FrameRenderer(sim, cell_px=CELL_PX, particles=False, backend="raster", wind_arrow=False).render()
+    base = np.array(cell_colours()[land[5, 5], land[5, 5]], np.float64)
+    tint = np.floor(base + EXTINGUISHED_ALPHA * (np.array(EXTINGUISHED_COLOUR) - base) + 0.5).astype(int)
+    assert np.abs(np.array(cell_pixel(frame, 5, 5)) - tint).max() <= 1
+    assert cell_pixel(frame, 5, 6) == tuple(cell_colours()[BURNING, land[5, 6]])  # never flooded: still burning
+    sim.reset()  # a new episode forgets the mark
+    frame = FrameRenderer(sim, cell_px=CELL_PX, particles=False, backend="raster", wind_arrow=False).render()
+    assert cell_pixel(frame, 5, 5) == tuple(cell_colours()[land[5, 5], land[5, 5]])
+
+
+def test_fires_not_on_the_detected_map_are_dimmed():
+    init_taichi("cpu")
+    s = FireSim(load_map("15x15_Woods"), ignition=IgnitionConfig(fire_percentage=0.0), num_envs=1, seed=1)
+    s.reset()
+    mask = np.zeros((1, s.rows, s.cols), np.int32)
+    mask[0, 3, 3:5] = 1
+    s.ignite_cells(mask.reshape(1, -1))
+    known = ti.field(ti.i8, (1, s.rows, s.cols))
+    known[0, 3, 3] = 1  # only (3, 3) has been seen
+    frame = FrameRenderer(s, cell_px=CELL_PX, particles=False, backend="raster", wind_arrow=False,
+                          known_fires=known).render()
+    assert cell_pixel(frame, 3, 3) == (255, 0, 0)
+    assert cell_pixel(frame, 3, 4) == UNSEEN_FIRE_COLOUR
+
+
+def test_single_env_renders_the_terminal_state_until_the_reset():
+    import gymnasium
+
+    env = gymnasium.make("roshan/FlyAgent-v0", config=CFG, render_mode="rgb_array")
+    env.reset(seed=3)
+    start = env.render()
+    for _ in range(env.unwrapped.vector_env.t_max):
+        _, _, terminated, truncated, _ = env.step(-np.ones((2, 2), np.float32))  # both drones fly off the map
+        if terminated or truncated:
+            break
+    assert terminated or truncated
+    end = env.render()
+    env.reset()
+    assert not np.array_equal(end, env.render()), "after the last step render() showed the next episode"
+    assert not np.array_equal(end, start)
+    env.close()
+
+
+def test_caption_line_breaks_do_not_depend_on_the_numbers():
+    frame = np.zeros((40, 300, 3), np.uint8)
+    short = annotate.annotate(frame, "FlyAgent model x | episode 0 | step 0 | t = 0.0 s | fires left 3", [])
+    long = annotate.annotate(frame, "FlyAgent model x | episode 12 | step 12345 | t = 1234.5 s | fires left 300", [])
+    assert short.shape == long.shape  # every frame of a GIF has the same size
