@@ -33,7 +33,7 @@ else
 endif
 STAMP := $(STAMP_DIR)/.roshan-installed-$(INSTALL_KEY)
 
-.PHONY: install system-deps demo test lint bench-fire bench-fidelity clean
+.PHONY: install system-deps demo test lint bench-fire bench-fidelity clean print-python
 
 install: $(STAMP)
 
@@ -90,3 +90,7 @@ bench-fidelity:
 
 clean:
 	rm -rf out .pytest_cache .ruff_cache
+
+# Which interpreter and install stamp this make would use (tests/test_makefile.py).
+print-python:
+	@echo "$(PYTHON) $(STAMP)"
