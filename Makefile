@@ -1,19 +1,53 @@
 # ROSHAN-Taichi: the two set-up commands of the README are `make demo` and `make test`.
-# Both install everything first (system Vulkan driver for GGUI, CPU torch, the package with dev extras).
-PYTHON ?= python3
+# Both install everything first (system Vulkan driver for GGUI, torch, the package with dev extras), once: a stamp in
+# the environment names what was installed, and only a change (pyproject.toml, the torch choice, another checkout)
+# installs again.
+#
+# Which Python: PYTHON=... when given; else the active virtualenv (VIRTUAL_ENV set, or a `python3` on PATH that runs
+# inside one, as in CI and fresh-check); else the project's own .venv, made here: Debian's Python refuses
+# `pip install` outside a virtualenv (PEP 668, "externally-managed-environment").
+ifeq ($(origin PYTHON),undefined)
+  ifneq ($(VIRTUAL_ENV),)
+    PYTHON := $(VIRTUAL_ENV)/bin/python
+  else ifeq ($(shell python3 -c 'import sys; print(sys.prefix != sys.base_prefix)' 2>/dev/null),True)
+    PYTHON := python3
+  else
+    VENV := $(CURDIR)/.venv
+    PYTHON := $(VENV)/bin/python
+  endif
+endif
 PIP := $(PYTHON) -m pip
+# torch: plain `pip install torch==2.13.0` takes what the configured index has. On PyPI that is, for Linux, the CUDA
+# build (several GB with its nvidia-* wheels); TORCH_INDEX=https://download.pytorch.org/whl/cpu takes the small CPU
+# build from PyTorch's own index instead.
+TORCH ?= torch==2.13.0
+TORCH_INDEX ?=
 DEMO_DIR ?= out/demo
 
-.PHONY: install system-deps demo test lint bench-fire bench-fidelity clean
+INSTALL_KEY := $(shell (cat pyproject.toml; echo "$(CURDIR) $(TORCH) $(TORCH_INDEX)") | sha256sum | cut -c1-12)
+# The stamp lives in the virtualenv it describes (a new venv has none); a Python outside any venv keeps it in build/.
+ifdef VENV
+  STAMP_DIR := $(VENV)
+else
+  STAMP_DIR := $(or $(shell $(PYTHON) -c 'import sys; print(sys.prefix if sys.prefix != sys.base_prefix else "build")'                  2>/dev/null),build)
+endif
+STAMP := $(STAMP_DIR)/.roshan-installed-$(INSTALL_KEY)
 
-install: system-deps
+.PHONY: install system-deps demo test lint bench-fire bench-fidelity clean print-python
+
+install: $(STAMP)
+
+$(STAMP):
+	@$(MAKE) --no-print-directory system-deps
+	@if [ -n "$(VENV)" ] && [ ! -x "$(PYTHON)" ]; then echo "python3 -m venv .venv"; python3 -m venv "$(VENV)"; fi
 	$(PIP) install -q --upgrade pip
-	# The CPU build of torch: an unpinned `torch` would pull several GB of CUDA wheels.
-	$(PIP) install -q torch==2.13.0
+	$(PIP) install -q $(TORCH) $(if $(TORCH_INDEX),--index-url $(TORCH_INDEX))
 	$(PIP) install -q -e ".[dev]"
+	@mkdir -p $(STAMP_DIR) && rm -f $(STAMP_DIR)/.roshan-installed-* && touch $@
 
 # GGUI renders offscreen through Vulkan; on a machine without a GPU driver Mesa's lavapipe provides it.
 # Without it (not root, not Debian) frames still render through the raster fallback, with a warning.
+# python3-venv: Debian's python3 makes no virtualenv without it (ensurepip).
 system-deps:
 	@if dpkg -s mesa-vulkan-drivers >/dev/null 2>&1; then \
 		echo "mesa-vulkan-drivers: installed"; \
@@ -24,19 +58,29 @@ system-deps:
 	else \
 		echo "WARNING: install Vulkan (Debian: apt-get install -y mesa-vulkan-drivers) for GGUI frames"; \
 	fi
+	@if [ -n "$(VENV)" ] && [ ! -x "$(PYTHON)" ] && ! python3 -c 'import ensurepip' >/dev/null 2>&1; then \
+		if command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
+			apt-get install -y -qq python3-venv >/dev/null 2>&1 || \
+			(apt-get update -qq && apt-get install -y -qq python3-venv); \
+		else \
+			echo "ERROR: python3 cannot make a virtualenv; install it (Debian: apt-get install -y python3-venv)"; \
+			exit 1; \
+		fi; \
+	fi
 
 # The full hierarchy on the bundled 35x36 map at the thesis's 35 % ignition: the shipped planner (drones flown by
 # the shipped FlyAgent, explorers sweeping the map) against the greedy heuristic on the same 8 episodes.
+# --replace: out/demo is the demo's own folder, and a second `make demo` shows a fresh run there.
 demo: install
 	$(PYTHON) -m roshan eval models/planner --baseline greedy --episodes 8 --envs 8 --seed 0 --out $(DEMO_DIR) \
-		--json $(DEMO_DIR)/planner_vs_greedy.json --gif $(DEMO_DIR)/planner.gif
+		--json $(DEMO_DIR)/planner_vs_greedy.json --gif $(DEMO_DIR)/planner.gif --replace
 	@echo "demo: $(DEMO_DIR)/planner.gif, $(DEMO_DIR)/planner_vs_greedy.json, plots in $(DEMO_DIR) and $(DEMO_DIR)/greedy"
 
 test: install
 	$(PYTHON) -m pytest -q
 
-lint:
-	ruff check .
+lint: install
+	$(PYTHON) -m ruff check .
 
 bench-fire:
 	$(PYTHON) -m roshan bench fire --json benchmarks/results/fire_cpu.json
@@ -46,3 +90,7 @@ bench-fidelity:
 
 clean:
 	rm -rf out .pytest_cache .ruff_cache
+
+# Which interpreter and install stamp this make would use (tests/test_makefile.py).
+print-python:
+	@echo "$(PYTHON) $(STAMP)"

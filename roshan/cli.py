@@ -143,6 +143,27 @@ def maps_crop(source, bounds, crs, output):
     click.echo(describe_map(m))
 
 
+# ------------------------------------------------------------------------------------------------ config
+
+
+@main.group("config")
+def config_group():
+    """The config keys that --set and config files take."""
+
+
+@config_group.command("show")
+@click.argument("section", required=False, default="")
+def config_show(section):
+    """Every config key with its default, type, allowed values and doc; SECTION (e.g. fire, ppo,
+    planner.rewards, or one key such as fire.dt) shows only that part."""
+    from roshan.config import show_keys
+
+    try:
+        click.echo(show_keys(section))
+    except ConfigError as exc:
+        _fail(exc)
+
+
 # ------------------------------------------------------------------------------------------------ train / eval
 
 
@@ -197,9 +218,13 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
               help="Which checkpoint of a run folder; best = best_eval (periodic evaluation) if the run has one, "
                    "else best_objective.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
-              help="Folder for episodes.csv, summary.json, plots (default: RUN/eval).")
+              help="Folder for episodes.csv, summary.json, plots (default: RUN/eval/<seed>-<episodes>[-<hash of "
+                   "the other settings>]).")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
-              help="Write {episodes, success_rate, failure_rates, tte} here.")
+              help="Write {episodes, success_rate, failure_rates, tte, provenance} here.")
+@click.option("--replace", is_flag=True,
+              help="Overwrite an evaluation already in the output folder (and --json/--gif/--frames files); "
+                   "without it such outputs are refused.")
 @click.option("--frames", "frames_dir", type=click.Path(file_okay=False), default=None,
               help="PNG frames of env 0's first episode.")
 @click.option("--gif", "gif_path", type=click.Path(dir_okay=False), default=None, help="GIF of env 0's first episode.")
@@ -211,13 +236,17 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
 @SETS
 @ARCH
 @THREADS
-def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, frames_dir, gif_path, baseline, save_buffer,
-             quiet, sets, arch, threads):
+def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, replace, frames_dir, gif_path, baseline,
+             save_buffer, quiet, sets, arch, threads):
     """Evaluate a trained FlyAgent or planner (a run folder or a checkpoint file) with deterministic actions.
 
     Prints a thesis-style table (success rate with its Wilson interval, failure reasons, TTE mean ± std
     (median)); --set changes the evaluation setting (e.g. --set ignition.fire_percentage=0.05). For a planner
     run, --baseline greedy plays the heuristic controller on the same episodes (same seed and envs).
+
+    Files go to a new folder per setting, RUN/eval/<seed>-<episodes>[-<hash>] (the hash covers --set, --baseline,
+    --checkpoint, --envs, --arch where they differ from the defaults); an output that already holds results is
+    refused unless --replace. Every summary JSON records the command, overrides, checkpoint and code version.
     """
     from roshan.runs import evaluate as ev
     from roshan.runs.report.tables import format_comparison, format_table
@@ -235,7 +264,7 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, frames_dir
                                   json_path=Path(json_path) if json_path else None,
                                   frames_dir=Path(frames_dir) if frames_dir else None,
                                   gif_path=Path(gif_path) if gif_path else None, which=which,
-                                  progress_bar=not quiet, overrides=sets, baseline=baseline)
+                                  progress_bar=not quiet, overrides=sets, baseline=baseline, replace=replace)
     except (ConfigError, MapError, ValueError, OSError) as exc:
         _fail(exc)
     title = f"{target} ({Path(summary['checkpoint']).stem}, seed {seed})"

@@ -5,6 +5,9 @@ process holds at most one: users of the same size share it, and a user of anothe
 to open). The window is destroyed when its last user releases it.
 """
 
+import os
+import tempfile
+
 import taichi as ti
 from taichi.lang import impl
 
@@ -22,8 +25,22 @@ def _open_window(res: tuple[int, int]):
 
 def _close_window() -> None:
     if _shared["window"] is not None:
-        _shared["window"].destroy()
+        _destroy_elsewhere(_shared["window"])
     _shared.update(window=None, res=None, runtime=None)
+
+
+def _destroy_elsewhere(window) -> None:
+    """Destroy ``window`` with a scratch folder as the working directory: Dear ImGui (inside GGUI) writes its
+    window layout to ``./imgui.ini`` when its context is destroyed (measured with Taichi 1.7.4: never while frames
+    render, nor at exit with the window open), and Taichi offers no way to turn that off. The user's folder stays
+    clean. The working directory is process-wide, but only for the instant of the destroy."""
+    with tempfile.TemporaryDirectory(prefix="roshan_ggui_") as scratch:
+        cwd = os.getcwd()
+        os.chdir(scratch)
+        try:
+            window.destroy()
+        finally:
+            os.chdir(cwd)
 
 
 def acquire_window(res: tuple[int, int], held):

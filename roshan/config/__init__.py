@@ -9,7 +9,7 @@ The sections live by subject: :mod:`roshan.config.sim` (map, fire, wind, ignitio
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from roshan.config import schema
+from roshan.config import describe, schema
 from roshan.config.agents import (
     CONTROLLERS,
     PLANNER_NEWEST_TERMS,
@@ -109,6 +109,12 @@ def all_keys(cls: type = Config, prefix: str = "") -> list[str]:
     return schema.all_keys(cls, prefix)
 
 
+def show_keys(section: str = "") -> str:
+    """``roshan config show [SECTION]``: every key of ``section`` (a section, a key, or "" for all) with its
+    default, type, allowed values and doc; an unknown section is a ConfigError with the closest name."""
+    return describe.format_keys(Config, describe.describe_keys(Config, section))
+
+
 load_run_config = load_config
 
 
@@ -118,5 +124,5 @@ __all__ = [
     "FLY_ONLY_PPO_KEYS", "OptimConfig", "PPOConfig", "PlannerConfig", "PlannerRewardConfig", "RNDConfig",
     "RadiationConfig", "RewardConfig", "SimConfig", "TD3Config", "TrainConfig", "WindConfig", "all_keys",
     "apply_overrides", "choice", "dump_config", "from_dict", "load_config", "load_run_config", "num", "replace",
-    "suggest", "to_dict", "upgrade_config_dict",
+    "show_keys", "suggest", "to_dict", "upgrade_config_dict",
 ]

@@ -7,6 +7,8 @@ The env seed makes an evaluation repeatable: the same seed gives the same fire l
 
 import json
 import math
+import shlex
+import sys
 import tempfile
 from pathlib import Path
 
@@ -17,19 +19,21 @@ from tqdm import tqdm
 from roshan.algos.buffers import ReplayBuffer
 from roshan.algos.frozen import check_setting, load_agent, policy_fn
 from roshan.algos.networks import flatten_drones
+from roshan.checkpoints import resolve_checkpoint
 from roshan.config import apply_overrides
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import straight_to_goal
 from roshan.episode import EPISODE_FIELDS, REASONS
-from roshan.io import prepare_output, write_gif, writing
+from roshan.io import OutputError, prepare_output, write_gif, writing
 from roshan.runs.collect import next_observation
 from roshan.runs.envs import make_env
+from roshan.runs.provenance import code_version, settings_hash
 from roshan.runs.report.files import write_episodes_csv, write_summary_json
 from roshan.runs.report.plots import plot_comparison, plot_episodes, plot_learning_curves
 from roshan.runs.report.scalars import read_tensorboard_scalars
 from roshan.runs.report.stats import summarize
 from roshan.runs.report.tables import format_table
-from roshan.runtime import ensure_taichi, torch_device
+from roshan.runtime import current_arch, ensure_taichi, torch_device
 
 
 @torch.no_grad()
@@ -118,9 +122,47 @@ def planner_random_fn(seed: int):
     return act
 
 
-def prepare_outputs(out_dir: Path, json_path: Path | None, frames_dir: Path | None, gif_path: Path | None) -> None:
-    """Create the evaluation's output folders and check they can be written before any episode runs."""
+# The files that make an evaluation; a folder holding one of them holds results (the plots are rewritten by name).
+RESULT_FILES = ("episodes.csv", "summary.json", "table.txt")
+
+
+def held_results(folder: Path) -> list[str]:
+    """The result files already in ``folder`` (and in its baseline subfolders), relative to it."""
+    return [str(p.relative_to(folder)) for sub in ("", *BASELINES) for name in RESULT_FILES
+            if (p := Path(folder) / sub / name).is_file()]
+
+
+def _clear_results(folder: Path) -> None:
+    """Remove an earlier evaluation's files that a new one may not rewrite (a baseline's folder, comparisons)."""
+    for sub in ("", *BASELINES):
+        for name in RESULT_FILES:
+            (Path(folder) / sub / name).unlink(missing_ok=True)
+    for p in Path(folder).glob("comparison_*.png"):
+        p.unlink()
+
+
+def _refuse_existing(what: str, path: Path, held: str, way_out: str) -> None:
+    raise OutputError(what, path, f"it already holds {held}; give --replace to overwrite it, or {way_out}")
+
+
+def prepare_outputs(out_dir: Path, json_path: Path | None, frames_dir: Path | None, gif_path: Path | None,
+                    replace: bool = False) -> None:
+    """Create the evaluation's output folders and check they can be written before any episode runs. Without
+    ``replace``, a folder that holds an evaluation, an existing JSON or GIF file or a frames folder with frames
+    is refused (:class:`OutputError` naming it and the two ways out); with it, the old evaluation's files go."""
+    if not replace:
+        if held := held_results(out_dir):
+            _refuse_existing("evaluation files", out_dir, f"an evaluation ({', '.join(held)})",
+                             "--out DIR to write a new folder")
+        for what, path, flag in (("the evaluation JSON", json_path, "--json"), ("the GIF", gif_path, "--gif")):
+            if path is not None and Path(path).is_file():
+                _refuse_existing(what, path, "a file of that name", f"{flag} FILE naming a new file")
+        if frames_dir is not None and any(Path(frames_dir).glob("frame_*.png")):
+            _refuse_existing("frames", frames_dir, "frames", "--frames DIR naming a new folder")
     prepare_output(out_dir, "evaluation files")
+    if replace:
+        with writing("evaluation files", out_dir):
+            _clear_results(out_dir)
     if json_path is not None:
         prepare_output(json_path, "the evaluation JSON", is_dir=False)
     if frames_dir is not None:
@@ -129,15 +171,42 @@ def prepare_outputs(out_dir: Path, json_path: Path | None, frames_dir: Path | No
         prepare_output(gif_path, "the GIF", is_dir=False)
 
 
-def write_outputs(episodes: dict, out_dir: Path, title: str) -> dict:
-    """episodes.csv, summary.json and the plots in ``out_dir``; returns the summary."""
+def evaluation_name(seed: int, episodes: int, settings: dict) -> str:
+    """An evaluation's folder name: ``<seed>-<episodes>``, plus ``-<hash>`` of ``settings`` (whatever else
+    changes the results: overrides, baseline, checkpoint, envs, arch) when there are any."""
+    return f"{seed}-{episodes}" + (f"-{settings_hash(settings)}" if settings else "")
+
+
+def _default_checkpoint(run_dir: Path) -> Path | None:
+    try:
+        return resolve_checkpoint(run_dir, "best")
+    except FileNotFoundError:
+        return None
+
+
+def _provenance(target, path: Path, which: str, seed: int, episodes: int, num_envs: int, overrides, baseline,
+                arch: str) -> dict:
+    """What a summary JSON records about how it was made: the command that reproduces it (and the process's own
+    command line), the overrides, the checkpoint, the code version."""
+    command = ["roshan", "eval", str(target), "--episodes", str(episodes), "--seed", str(seed), "--envs",
+               str(num_envs), "--checkpoint", which, *(["--baseline", baseline] if baseline else []),
+               *[a for o in overrides for a in ("--set", o)], *(["--arch", arch] if arch != "cpu" else [])]
+    return {"command": shlex.join(command), "argv": shlex.join(sys.argv), "target": str(target),
+            "overrides": list(overrides), "checkpoint": str(path), "checkpoint_choice": which, "seed": seed,
+            "episodes": episodes, "envs": num_envs, "baseline": baseline, "arch": arch, "code": code_version()}
+
+
+def write_outputs(episodes: dict, out_dir: Path, title: str, provenance: dict | None = None) -> dict:
+    """episodes.csv, summary.json (with ``provenance``) and the plots in ``out_dir``; returns the summary."""
     with writing("evaluation files", out_dir):
-        return _write_outputs(episodes, out_dir, title)
+        return _write_outputs(episodes, out_dir, title, provenance)
 
 
-def _write_outputs(episodes: dict, out_dir: Path, title: str) -> dict:
+def _write_outputs(episodes: dict, out_dir: Path, title: str, provenance: dict | None) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = summarize(episodes)
+    if provenance is not None:
+        summary["provenance"] = provenance
     write_episodes_csv(episodes, out_dir / "episodes.csv")
     write_summary_json(summary, out_dir / "summary.json")
     plot_episodes(episodes, out_dir)
@@ -157,9 +226,12 @@ def flyagent_json(summary: dict, reasons: tuple[str, ...] = ("collision", "bound
 def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_envs: int | None = None,
                  out_dir: Path | None = None, json_path: Path | None = None, frames_dir: Path | None = None,
                  gif_path: Path | None = None, which: str = "best", progress_bar: bool = True,
-                 overrides: list[str] | tuple[str, ...] = (), baseline: str | None = None) -> dict:
+                 overrides: list[str] | tuple[str, ...] = (), baseline: str | None = None,
+                 replace: bool = False) -> dict:
     """Evaluate a run folder or checkpoint with deterministic actions; files go to ``out_dir`` (default
-    ``<run>/eval``). ``overrides`` (``section.key=value``) change the evaluation setting, not the network.
+    ``<run>/eval/<seed>-<episodes>[-<hash of the other settings>]``, see :func:`evaluation_name`). An output
+    that already holds results is refused unless ``replace``; every summary JSON records its provenance.
+    ``overrides`` (``section.key=value``) change the evaluation setting, not the network.
     With ``baseline`` (random | greedy) the scripted policy runs on the same episodes (same seed: same fire
     layouts and wind) and its summary is returned under ``"baseline"``.
     Returns the summary dict of :func:`roshan.runs.report.stats.summarize` plus ``checkpoint`` and ``out_dir``."""
@@ -168,9 +240,18 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
     cfg = apply_overrides(trained, overrides) if overrides else trained
     check_setting(trained, cfg, path)
     run_dir = path.parent.parent if path.parent.name == "checkpoints" else path.parent
-    out = Path(out_dir) if out_dir else run_dir / "eval"
-    prepare_outputs(out, json_path, frames_dir, gif_path)
     E = max(1, min(num_envs or cfg.train.eval_envs, episodes))
+    arch = current_arch() or "cpu"
+    if out_dir is None:
+        # what changes the results besides seed and episodes, where it differs from `roshan eval RUN`'s default
+        default_envs = max(1, min(cfg.train.eval_envs, episodes))
+        settings = {"overrides": list(overrides), "baseline": baseline, "envs": E if E != default_envs else None,
+                    "checkpoint": path.name if path != _default_checkpoint(run_dir) else None,
+                    "arch": arch if arch != "cpu" else None}
+        out_dir = run_dir / "eval" / evaluation_name(seed, episodes, {k: v for k, v in settings.items() if v})
+    out = Path(out_dir)
+    prepare_outputs(out, json_path, frames_dir, gif_path, replace)
+    provenance = _provenance(target, path, which, seed, episodes, E, overrides, baseline, arch)
     env = make_env(cfg, E, seed, evaluation=True)
     env.caption_name = f"{env.default_caption_name} model {run_dir.name}"
     scratch = None
@@ -190,7 +271,8 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         base_eps = run_episodes(env, baseline_fn(baseline, E, env.num_drones, seed), episodes, seed,
                                 progress_bar=progress_bar)
     env.close()
-    summary = write_outputs(eps, out, f"{run_dir.name} ({path.stem}, {len(eps['reward'])} episodes, seed {seed})")
+    summary = write_outputs(eps, out, f"{run_dir.name} ({path.stem}, {len(eps['reward'])} episodes, seed {seed})",
+                            provenance)
     tb = run_dir / "tb"
     if tb.is_dir():
         scalars = read_tensorboard_scalars(tb)
@@ -199,10 +281,11 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
     payload = flyagent_json(summary, env.failure_reasons)
     if base_eps is not None:
         base = write_outputs(base_eps, out / baseline, f"{baseline} baseline ({len(base_eps['reward'])} episodes, "
-                                                         f"seed {seed})")
+                                                         f"seed {seed})", provenance)
         plot_comparison({"policy": eps, baseline: base_eps}, out)
         payload = {"policy": payload, baseline: flyagent_json(base, env.failure_reasons)}
         summary["baseline"] = base
+    payload["provenance"] = provenance
     if json_path is not None:
         with writing("the evaluation JSON", json_path):
             Path(json_path).write_text(json.dumps(payload, indent=2) + "\n")

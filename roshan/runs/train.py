@@ -476,8 +476,11 @@ def train(cfg: Config, run_dir: Path, resume: bool = False, progress_bar: bool =
         progress = trainer.run()
     result = {"run_dir": str(run_dir), **progress.state_dict(), "train_episodes": trainer.episodes.episodes}
     if evaluate_at_end:
+        # the run's own evaluation sits in RUN/eval itself (a resume re-evaluates and replaces it); `roshan eval`
+        # writes named folders next to it
         summary = evaluate_run(run_dir, episodes=cfg.train.eval_episodes, seed=cfg.sim.seed + 20_000,
-                               num_envs=cfg.train.eval_envs, progress_bar=progress_bar)
+                               num_envs=cfg.train.eval_envs, progress_bar=progress_bar, out_dir=Path(run_dir) / "eval",
+                               replace=True)
         result["eval"] = summary
     return result
 

@@ -8,6 +8,8 @@ step is one fire update, and envs whose episode ends restart at once (same-step 
 from __future__ import annotations
 
 import json
+import shutil
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -69,9 +71,9 @@ def run_simulation(cfg: Config, steps: int, every: int = 100, frames_dir: Path |
         return run_drone_simulation(cfg, steps, drones, policy, every, frames_dir, gif, progress)
     _check_steps(steps, every)
     sim = build_sim(cfg)
-    renderer = None
+    renderer = scratch = None
     if frames_dir is not None or gif is not None:
-        frames_dir = _frames_dir(frames_dir, gif)
+        frames_dir, scratch = _frames_dir(frames_dir)
         renderer = FrameRenderer(sim)
     result = SimulationResult()
     t0 = time.perf_counter()
@@ -99,7 +101,7 @@ def run_simulation(cfg: Config, steps: int, every: int = 100, frames_dir: Path |
                                                                                 + np.sum(rec["radiation"])))
     if bar is not None:
         bar.close()
-    _finish_frames(renderer, result, gif)
+    _finish_frames(renderer, result, gif, scratch)
     result.timing = _timing(steps, cfg.sim.envs, t_reset, sim_seconds, sim.memory_bytes_per_env(), t0)
     return result
 
@@ -159,9 +161,9 @@ def run_drone_simulation(cfg: Config, steps: int, drones: int, policy: str = "gr
         raise ConfigError(f"--drones: {exc}") from exc
     init_taichi(cfg.sim.arch, cfg.sim.threads or None)
     env, fly = _build_fly_env(cfg)
-    renderer = overlay = None
+    renderer = overlay = scratch = None
     if frames_dir is not None or gif is not None:
-        frames_dir = _frames_dir(frames_dir, gif)
+        frames_dir, scratch = _frames_dir(frames_dir)
         renderer, overlay = FrameRenderer(env.fire), drone_overlay(env.drones, 0)
     result = SimulationResult()
     tally = _EpisodeTally(env)
@@ -195,7 +197,7 @@ def run_drone_simulation(cfg: Config, steps: int, drones: int, policy: str = "gr
     if bar is not None:
         bar.close()
     env.close()
-    _finish_frames(renderer, result, gif)
+    _finish_frames(renderer, result, gif, scratch)
     result.timing = _timing(steps, cfg.sim.envs, t_reset, step_seconds, env.fire.memory_bytes_per_env(), t0)
     result.drones = _drone_summary(result.series[-1], int(drones), policy, fly, env.t_max)
     return result
@@ -235,25 +237,33 @@ def _check_steps(steps: int, every: int) -> None:
 def prepare_outputs(frames_dir: Path | None, gif: Path | None, json_path: Path | None) -> None:
     """Create the output folders and check they can be written before anything is simulated: a run of hours
     must not end by losing its results to a missing or read-only folder."""
-    if frames_dir is not None or gif is not None:
-        _frames_dir(frames_dir, gif)
+    if frames_dir is not None:
+        prepare_output(frames_dir, "frames")
     if gif is not None:
         prepare_output(gif, "the GIF", is_dir=False)
     if json_path is not None:
         prepare_output(json_path, "the JSON series", is_dir=False)
 
 
-def _frames_dir(frames_dir: Path | None, gif: Path | None) -> Path:
-    frames_dir = Path(frames_dir) if frames_dir is not None else Path(gif).with_suffix("").parent / "frames"
-    return prepare_output(frames_dir, "frames")
+def _frames_dir(frames_dir: Path | None) -> tuple[Path, Path | None]:
+    """(the folder frames go to, the scratch folder to remove afterwards): ``--frames DIR``, or for a GIF alone
+    a temporary folder, so that ``--gif`` leaves nothing but the GIF behind."""
+    if frames_dir is not None:
+        return prepare_output(frames_dir, "frames"), None
+    scratch = Path(tempfile.mkdtemp(prefix="roshan_frames_"))
+    return scratch, scratch
 
 
-def _finish_frames(renderer, result: SimulationResult, gif: Path | None) -> None:
+def _finish_frames(renderer, result: SimulationResult, gif: Path | None, scratch: Path | None = None) -> None:
     if renderer is not None:
         renderer.close()
-        if gif is not None:
-            with writing("the GIF", gif):
-                result.gif = write_gif(result.frames, Path(gif))
+        try:
+            if gif is not None:
+                with writing("the GIF", gif):
+                    result.gif = write_gif(result.frames, Path(gif))
+        finally:
+            if scratch is not None:
+                shutil.rmtree(scratch, ignore_errors=True)
 
 
 def _timing(steps: int, envs: int, t_reset: float, step_seconds: float, memory: int, t0: float) -> dict:

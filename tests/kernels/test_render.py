@@ -240,3 +240,14 @@ def test_write_gif_keeps_every_frame(tmp_path):
         assert gif.n_frames == 4
         assert gif.info["loop"] == 0
         assert gif.info["duration"] == 200
+
+
+def test_ggui_frames_leave_no_imgui_ini_in_the_working_directory(sim, ggui, tmp_path, monkeypatch):
+    """Dear ImGui saves ./imgui.ini when GGUI's window is destroyed; the user's folder must stay clean."""
+    monkeypatch.chdir(tmp_path)
+    r = FrameRenderer(sim, env=0, cell_px=CELL_PX, backend="ggui")
+    r.render()
+    r.present()
+    r.close()  # the last user: the shared window is destroyed here
+    assert not (tmp_path / "imgui.ini").exists()
+    assert list(tmp_path.iterdir()) == []

@@ -41,12 +41,14 @@ def test_planner_trains_resumes_and_evaluates_against_greedy_on_the_same_episode
     assert res.exit_code == 0, res.output
     assert "greedy" in res.output and "TTE" in res.output
     payload = json.loads(out.read_text())
-    assert set(payload) == {"policy", "greedy"}
+    assert set(payload) == {"policy", "greedy", "provenance"}
+    assert payload.pop("provenance")["baseline"] == "greedy"
     for part in payload.values():
         assert part["episodes"] == 4 and 0.0 <= part["success_rate"] <= 1.0
         assert set(part["failure_rates"]) == {"collision", "boundary", "timeout", "burnout"}
         assert part["failure_rates"]["collision"] == 0.0  # collisions never end planner episodes
         assert part["tte"]["mean"] > 0 and part["tte"]["median"] > 0
-    assert (run / "eval" / "episodes.csv").is_file() and (run / "eval" / "greedy" / "episodes.csv").is_file()
+    (folder,) = (run / "eval").glob("5-4-*")  # the baseline is a setting of its own: a hashed folder name
+    assert (folder / "episodes.csv").is_file() and (folder / "greedy" / "episodes.csv").is_file()
     assert gif.read_bytes()[:6] == b"GIF89a"
     assert [p.name for p in gif.parent.iterdir()] == ["episode.gif"]  # the GIF's frames were scratch files

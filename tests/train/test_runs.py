@@ -119,7 +119,7 @@ def test_shipped_simple_model_evaluates_and_writes_files(tmp_path):
               "--json", js, "--quiet")
     assert res.exit_code == 0, res.output
     summary = json.loads(js.read_text())
-    assert set(summary) == {"episodes", "success_rate", "failure_rates", "tte"}
+    assert set(summary) == {"episodes", "success_rate", "failure_rates", "tte", "provenance"}
     assert summary["episodes"] == 20
     assert summary["success_rate"] >= 0.9
     assert set(summary["failure_rates"]) == {"collision", "boundary", "timeout"}
@@ -134,7 +134,9 @@ def test_eval_is_repeatable_under_a_seed(tmp_path):
         res = cli("eval", ROOT / "models/fly_simple", "--episodes", 6, "--envs", 3, "--seed", 5, "--out",
                   tmp_path / js.stem, "--json", js, "--quiet")
         assert res.exit_code == 0, res.output
-    assert json.loads(a.read_text()) == json.loads(b.read_text())
+    results = [json.loads(js.read_text()) for js in (a, b)]
+    assert [r.pop("provenance")["seed"] for r in results] == [5, 5]  # the rest is the same
+    assert results[0] == results[1]
 
 
 def test_td3_and_iql_run_end_to_end(tmp_path):
