@@ -40,6 +40,7 @@ from roshan.experiment.spec import Run, Spec, SpecError
 from roshan.io import prepare_output, write_atomic, writing
 from roshan.runs.envs import make_env
 from roshan.runs.evaluate import run_episodes, save_buffer, write_outputs
+from roshan.runs.provenance import code_version
 from roshan.runs.train import ensure_taichi_for, train
 from roshan.runtime import torch_device
 from roshan.study.storage import (
@@ -244,7 +245,10 @@ def execute_run(run: Run, folder: Path, extra: tuple[str, ...] = (), progress_ba
         trained = train(cfg, folder, resume=True, progress_bar=progress_bar, evaluate_at_end=False)
     episodes = evaluate(run, cfg, folder)
     ev_dir = folder / "eval" / f"{cond.eval_seed}-{cond.eval_episodes}"
-    summary = write_outputs(episodes, ev_dir, f"{run.key} ({len(episodes['reward'])} episodes, seed {cond.eval_seed})")
+    provenance = {"experiment": str(folder.parent.parent.name), "run": run.key, "config": cond.config,
+                  "overrides": [*cond.sets, *extra, f"sim.seed={run.seed}"], "code": code_version()}
+    summary = write_outputs(episodes, ev_dir, f"{run.key} ({len(episodes['reward'])} episodes, seed {cond.eval_seed})",
+                            provenance)
     result = {
         "run": run.key, "condition": cond.name, "seed": run.seed, "controller": cond.controller,
         "episodes": summary["episodes"], "eval_seed": cond.eval_seed, "success_rate": summary["success_rate"],
@@ -252,6 +256,7 @@ def execute_run(run: Run, folder: Path, extra: tuple[str, ...] = (), progress_ba
         "tte_episodes": [int(t) for t in episodes["time"]],
         "train": {k: trained[k] for k in ("updates", "env_steps", "seconds") if k in trained},
         "minutes": round((time.time() - start) / 60.0, 3), "host": socket.gethostname(), "run_dir": str(folder),
+        "code": provenance["code"],
     }
     with writing("the run's result", folder / "result.json"):
         write_atomic(folder / "result.json", (json.dumps(result, indent=2) + "\n").encode())
