@@ -2,9 +2,10 @@
 in an Optuna study, in the same storages as ``roshan study`` (a journal file by default, PostgreSQL to spread the
 runs over machines).
 
-- Creating the experiment enqueues one WAITING trial per run. A worker process claims one with ``study.ask()``,
-  which hands a waiting trial to exactly one caller (the storage's state change from WAITING to RUNNING is
-  atomic), trains and evaluates it, and tells the trial COMPLETE with its results as user attributes.
+- Creating the experiment enqueues one WAITING trial per run. A worker process claims the first waiting run in
+  the spec's order by the storage's atomic state change from WAITING to RUNNING (what ``study.ask()`` does), so
+  each run goes to exactly one worker; it trains and evaluates the run and tells the trial COMPLETE with its
+  results as user attributes.
 - A worker that dies (killed, machine lost) leaves its trial RUNNING; it is found stale as in a study (its process
   is gone, or its heartbeat is older than the grace period), failed, and queued again with the same ``run``. The
   retry continues the training from the run folder's latest checkpoint; finished runs are never redone.
@@ -24,12 +25,12 @@ import socket
 import subprocess
 import sys
 import time
-import warnings
 from collections.abc import Callable
 from pathlib import Path
 
 import optuna
 import torch
+from optuna.exceptions import UpdateFinishedTrialError
 from optuna.storages._heartbeat import get_heartbeat_thread
 from optuna.trial import TrialState
 
@@ -154,21 +155,21 @@ def progress(study: optuna.Study, keys=None) -> dict[str, int]:
 # ------------------------------------------------------------------------------------------ one worker
 
 
-def claim(study: optuna.Study) -> tuple[optuna.Trial, str] | None:
-    """A waiting run for this worker, or None when none is left. ``study.ask()`` pops a waiting trial for one
-    caller only; if another worker took the last one meanwhile, ask() makes a fresh trial, which is failed
-    here at once (marked ``spare``: no run)."""
-    if not study.get_trials(deepcopy=False, states=(TrialState.WAITING,)):
-        return None
-    with warnings.catch_warnings():  # the heartbeat runs around the execution (run_worker), not in optimize()
-        warnings.filterwarnings("ignore", "Heartbeat of storage is supposed to be used with Study.optimize")
-        trial = study.ask()
-    key = trial.user_attrs.get(RUN_ATTR)
-    if key is None:
-        trial.set_user_attr("spare", True)
-        study.tell(trial, state=TrialState.FAIL)
-        return None
-    return trial, key
+def claim(study: optuna.Study, order: dict[str, int]) -> tuple[optuna.Trial, str] | None:
+    """The first waiting run in the spec's order (``order``: key -> position; a retried run keeps its place, runs
+    this spec does not know are left to the machine whose spec has them), or None. Taking it is the storage's
+    atomic WAITING -> RUNNING change that ``study.ask()`` makes too, so each run goes to exactly one worker."""
+    storage = study._storage
+    waiting = [t for t in storage.get_all_trials(study._study_id, deepcopy=False, states=(TrialState.WAITING,))
+               if run_key(t) in order]
+    for t in sorted(waiting, key=lambda t: (order[run_key(t)], t.number)):
+        try:
+            if not storage.set_trial_state_values(t._trial_id, state=TrialState.RUNNING):
+                continue  # another worker took it a moment ago
+        except UpdateFinishedTrialError:
+            continue
+        return optuna.Trial(study, t._trial_id), run_key(t)
+    return None
 
 
 def _taken_elsewhere(study: optuna.Study, trial: optuna.Trial, key: str) -> bool:
@@ -188,7 +189,8 @@ def run_worker(spec: Spec, storage_url: str, root: str | Path, execute: Execute 
     study = load_experiment(storage, spec.name)
     check_runs(spec, study.user_attrs[STUDY_ATTR], study)
     fail_stale(study)
-    got = claim(study)
+    runs = {r.key: r for r in spec.runs()}
+    got = claim(study, {k: i for i, k in enumerate(runs)})
     if got is None:
         return 0
     trial, key = got
@@ -197,12 +199,6 @@ def run_worker(spec: Spec, storage_url: str, root: str | Path, execute: Execute 
     if _taken_elsewhere(study, trial, key):
         trial.set_user_attr("duplicate", True)
         study.tell(trial, state=TrialState.FAIL)
-        return 0
-    runs = {r.key: r for r in spec.runs()}
-    if key not in runs:  # queued by a larger spec on another machine: leave it to that one
-        study.tell(trial, state=TrialState.FAIL)
-        with experimental():
-            RetryStaleTrial(max_retry=None)(study, study._storage.get_trial(trial._trial_id))
         return 0
     run = runs[key]
     folder = run_dir(root, spec.name, run)
