@@ -133,22 +133,19 @@ def load_experiment(storage, name: str) -> optuna.Study:
 
 
 def progress(study: optuna.Study, keys=None) -> dict[str, int]:
-    """Runs (of ``keys``, default all) by state: done (COMPLETE), running, waiting, and failed for good (FAIL and
-    not retried)."""
-    trials = study.get_trials(deepcopy=False)
-    retried = {n for t in trials for n in t.system_attrs.get("retry_history", [])}
+    """Runs (of ``keys``, default all) by the state of their newest trial: done (COMPLETE), running, waiting, and
+    failed (a run that failed and was not queued again; the next ``experiment run`` queues it)."""
+    newest: dict[str, optuna.trial.FrozenTrial] = {}
+    for t in study.get_trials(deepcopy=False):
+        k = run_key(t)
+        if k is not None and (keys is None or k in keys) and (k not in newest or t.number > newest[k].number):
+            newest[k] = t
+    names = {TrialState.COMPLETE: "done", TrialState.RUNNING: "running", TrialState.WAITING: "waiting",
+             TrialState.FAIL: "failed"}
     out = {"done": 0, "running": 0, "waiting": 0, "failed": 0}
-    for t in trials:
-        if run_key(t) is None or t.number in retried or (keys is not None and run_key(t) not in keys):
-            continue
-        if t.state == TrialState.COMPLETE:
-            out["done"] += 1
-        elif t.state == TrialState.RUNNING:
-            out["running"] += 1
-        elif t.state == TrialState.WAITING:
-            out["waiting"] += 1
-        elif t.state == TrialState.FAIL:
-            out["failed"] += 1
+    for t in newest.values():
+        if t.state in names:
+            out[names[t.state]] += 1
     return out
 
 
