@@ -48,5 +48,12 @@ def test_planner_trains_resumes_and_evaluates_against_greedy_on_the_same_episode
         assert part["failure_rates"]["collision"] == 0.0  # collisions never end planner episodes
         assert part["tte"]["mean"] > 0 and part["tte"]["median"] > 0
     assert (run / "eval" / "episodes.csv").is_file() and (run / "eval" / "greedy" / "episodes.csv").is_file()
+    # tables show what each controller measured: the heuristic earns no reward; neither can collide or exit
+    greedy, planner = (run / "eval" / "greedy" / "table.txt").read_text(), (run / "eval" / "table.txt").read_text()
+    assert "Reward" not in greedy and "Reward (episode return)" in planner
+    for table in (greedy, planner):
+        assert "Collision rate" not in table and "Boundary rate" not in table and "Burnout rate" in table
+        assert "TTE (s)" in table and "Ever lit (% of cells)" in table
+    assert not (run / "eval" / "greedy" / "reward_vs_episode.png").exists()
     assert gif.read_bytes()[:6] == b"GIF89a"
     assert [p.name for p in gif.parent.iterdir()] == ["episode.gif"]  # the GIF's frames were scratch files
