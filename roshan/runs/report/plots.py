@@ -81,6 +81,9 @@ def _plot_outcome_bar(ep: dict, path: Path, reasons: Sequence[str], who: str | N
     ax = fig.add_subplot()
     bars = ax.bar([LABELS[c] for c in cats], counts, color=[_COLORS[c] for c in cats])
     ax.bar_label(bars)
+    from matplotlib.ticker import MaxNLocator
+
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))  # counts of episodes
     return _finish(ax, path, _titled(f"episode outcomes (n = {outcome.size})", who), "episodes")
 
 
