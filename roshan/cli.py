@@ -546,7 +546,10 @@ def bench_fire(env_counts, steps, warmup, big, json_path, arch, threads):
     except ValueError as exc:
         _fail(ValueError(f"--envs: expected comma-separated integers, got {env_counts!r}"))
         raise exc
-    report = b.fire_speed(counts, steps, warmup, big=big, arch=used, threads=threads)
+    click.echo(f"timing {2 * len(counts) + 2 * big} runs; each row as it finishes:", err=True)
+    click.echo(b.FIRE_SPEED_HEADER, err=True)
+    report = b.fire_speed(counts, steps, warmup, big=big, arch=used, threads=threads,
+                          on_row=lambda r: click.echo(b.format_fire_row(r), err=True))
     click.echo(b.format_fire_speed(report))
     if json_path:
         Path(json_path).write_text(json.dumps(report, indent=1))
@@ -582,7 +585,10 @@ def bench_env(env_counts, drones, fire_percentages, policies, min_env_steps, jso
     if unknown:
         _fail(ValueError(f"--policies: unknown {unknown}; expected random, simple, collision, fly_collision, "
                          "simple+ppo, collision+ppo"))
-    report = b.env_speed(counts, drones, pcts, pols, min_env_steps=min_env_steps)
+    click.echo(f"timing {len(counts) * len(pcts) * len(pols)} runs; each row as it finishes:", err=True)
+    click.echo(b.ENV_SPEED_HEADER, err=True)
+    report = b.env_speed(counts, drones, pcts, pols, min_env_steps=min_env_steps,
+                         on_row=lambda r: click.echo(b.format_env_row(r), err=True))
     click.echo(b.format_env_speed(report))
     if json_path:
         Path(json_path).write_text(json.dumps(report, indent=1))

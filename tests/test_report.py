@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -125,24 +126,67 @@ def test_evaluation_scalars_use_the_tensorboard_tags():
     assert scalars["Evaluation/Time_median"] == pytest.approx(35.0)
     assert scalars["Evaluation/Reward_std"] == pytest.approx(math.sqrt(8.4 / 9))
     assert scalars["Evaluation/Percent_Burned_ci_high"] == pytest.approx(0.5)
-    assert len(scalars) == 4 + 3 * 5
+    assert scalars["Evaluation/Collision_rate"] == pytest.approx(0.1)
+    assert len(scalars) == 4 + 3 + 3 * 5  # success, the three failure rates, reward / time / burned statistics
 
 
 # ---------------------------------------------------------------------------------------------- tables
 
+def table_rows(table: str) -> dict[str, str]:
+    """Row label -> value of a one-column table (label and value are separated by two or more spaces)."""
+    lines = [line for line in table.splitlines()[1:] if line and not line.startswith("-")]
+    return dict(re.split(r"\s{2,}", line.strip(), maxsplit=1) for line in lines)
+
+
 def test_format_table_numbers():
-    table = report.format_table(report.summarize(ten_episodes(burned=[0.1] * 10)), title="FlyAgent")
-    lines = table.splitlines()
-    assert lines[0] == "FlyAgent"
-    rows = {line[:16].strip(): line[16:].strip() for line in lines if line and not line.startswith("-")}
+    eps = ten_episodes(burned=[0.1] * 10, burning=[0.02] * 10, lit=[0.3] * 10, extinguished=[4] * 10)
+    table = report.format_table(report.summarize(eps, dt=0.1), title="FlyAgent")
+    assert table.splitlines()[0] == "FlyAgent"
+    rows = table_rows(table)
     assert rows["Episodes"] == "10"
     assert rows["Success rate"] == "70.0 % [39.7, 89.2]"
     assert rows["Collision rate"] == rows["Boundary rate"] == rows["Timeout rate"] == "10.0 %"
-    assert rows["TTE"] == "42.0 ± 28.3 (35.0)"
-    assert rows["TTE (successes)"] == "40.0 ± 21.6 (40.0)"
-    assert rows["Reward"] == "0.40 ± 0.97 (1.00)"
-    assert rows["Burned"] == "10.0 ± 0.0 (10.0) %"
+    assert rows["TTE (steps)"] == "42.0 ± 28.3 (35.0)"
+    assert rows["TTE (s)"] == "4.2 ± 2.8 (3.5)"  # steps * dt
+    assert rows["TTE of successes (steps)"] == "40.0 ± 21.6 (40.0)"
+    assert rows["Reward (episode return)"] == "0.40 ± 0.97 (1.00)"
+    assert rows["Burned out (% of cells)"] == "10.0 ± 0.0 (10.0) %"
+    assert rows["Burning at end (% of cells)"] == "2.0 ± 0.0 (2.0) %"
+    assert rows["Ever lit (% of cells)"] == "30.0 ± 0.0 (30.0) %"
+    assert rows["Extinguished (cells)"] == "4.0 ± 0.0 (4.0)"
     assert "Burnout rate" not in rows
+
+
+def test_tables_show_only_what_the_controller_measures():
+    # The greedy heuristic earns no reward: no reward column, so no reward row (not "0.00 ± 0.00").
+    greedy = ten_episodes()
+    del greedy["reward"]
+    greedy["reason"] = ["none"] * 7 + ["timeout", "burnout", "timeout"]
+    summary = report.summarize(greedy, reasons=("timeout", "burnout"))
+    assert "reward" not in summary
+    rows = table_rows(report.format_table(summary))
+    assert not any(label.startswith("Reward") for label in rows)
+    # The planner's records end by timeout or burnout only: no collision or boundary rows; burnout always.
+    assert [label for label in rows if label.endswith(" rate")] == ["Success rate", "Timeout rate", "Burnout rate"]
+    no_burnout = report.summarize({**greedy, "reason": ["none"] * 7 + ["timeout"] * 3}, reasons=("timeout", "burnout"))
+    assert no_burnout["failure_rates"] == {"timeout": 0.3, "burnout": 0.0}
+    # Side by side with a policy that has a reward: the greedy column reads "-" there.
+    policy = report.summarize({**greedy, "reward": [1.0] * 10}, reasons=("timeout", "burnout"))
+    row = {line.split("  ")[0].strip(): line for line in report.format_comparison(
+        {"planner": policy, "greedy": summary}).splitlines()}
+    assert row["Reward (episode return)"].split()[-1] == "-"
+    assert "Collision rate" not in row
+
+
+def test_outcome_plots_show_every_reason_the_controller_can_have(tmp_path):
+    from roshan.runs.report.plots import _categories
+
+    outcome = np.array(["success", "timeout"])
+    assert _categories([outcome], ("timeout", "burnout")) == ["success", "timeout", "burnout"]
+    greedy = ten_episodes()
+    del greedy["reward"]
+    names = [p.name for p in report.plot_episodes(greedy, tmp_path, reasons=("timeout", "burnout"), who="greedy")]
+    assert "reward_vs_episode.png" not in names and "reward_vs_time.png" not in names
 
 
 def test_format_comparison_side_by_side():
@@ -179,6 +223,18 @@ def test_csv_round_trip(tmp_path):
     np.testing.assert_array_equal(back["success"], eps["success"])
     np.testing.assert_array_equal(back["seed"], eps["seed"])
     np.testing.assert_array_equal(back["episode"], np.arange(1, 11))
+
+
+def test_csv_of_a_controller_without_reward_and_with_the_fire_columns(tmp_path):
+    eps = ten_episodes(burned=[0.1] * 10, burning=[0.05] * 10, lit=[0.25] * 10, extinguished=list(range(10)))
+    del eps["reward"]
+    path = report.write_episodes_csv(eps, tmp_path / "e.csv")
+    assert path.read_text().splitlines()[0] == ("Episode,Time,Percent_Burned,Burning_Fraction,Lit_Fraction,"
+                                                "Extinguished,Success,Failure_Reason")
+    back = report.read_episodes_csv(path)
+    assert "reward" not in back
+    np.testing.assert_array_equal(back["extinguished"], np.arange(10))
+    np.testing.assert_array_equal(back["lit"], eps["lit"])
     assert list(back["reason"]) == eps["reason"]
     assert report.summarize(back) == report.summarize(eps)
 
@@ -283,7 +339,7 @@ def test_bad_input_names_the_key(change, message):
 
 
 def test_extra_columns_are_ignored():
-    eps = ten_episodes(env=np.arange(10), extinguished=[3] * 10)
+    eps = ten_episodes(env=np.arange(10), index=[3] * 10)
     checked = report.validate_episodes(eps)
     assert sorted(checked) == ["reason", "reward", "success", "time"]
     assert report.summarize(eps) == report.summarize(ten_episodes())

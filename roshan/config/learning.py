@@ -22,6 +22,8 @@ class TrainConfig(Section):
     eval_every: int = num(0, 0, doc="evaluate every K updates; 0 = only at the end")
     eval_episodes: int = num(200, 1)
     eval_envs: int = num(50, 1)
+    eval_video_frames: int = num(30, 0, doc="periodic evaluation: frames of env 0's first episode logged to "
+                                            "TensorBoard as a video (every k-th step, to fit); 0 = no video")
     auto_train: int = num(1, 1, doc="independent runs (seeds seed, seed+1, ...) in sequence, then evaluation")
     torch_threads: int = num(0, 0, doc="torch intra-op threads; 0 = torch's default")
     buffer_path: str = ""  # IQL: the replay buffer to learn from (``roshan eval --save-buffer``)

@@ -18,7 +18,7 @@ import torch
 from gymnasium.vector import AutoresetMode
 
 from roshan.config import Config
-from roshan.episode import EPISODE_FIELDS
+from roshan.episode import EPISODE_FIELDS, FIRE_FIELDS, RECORD_FIELDS
 from roshan.kernels.pool import FlySims, PlannerSims
 from roshan.maps import LandCoverMap, load_map
 from roshan.runtime import check_built_in_this_runtime, ensure_taichi, taichi_generation, torch_device
@@ -29,8 +29,9 @@ class VectorEnvCore(gym.vector.VectorEnv):
 
     Every call returns the same tensor objects: observation views into one buffer, rewards, terminations and
     truncations (E,) (a time-out truncates). ``info`` holds ``final_obs`` (the observation of envs that ended
-    this step, same layout), ``episode_stats`` (a dict of (E,) tensors, :data:`roshan.episode.EPISODE_FIELDS`)
-    and ``_episode_stats`` (the (E,) bool mask of envs whose episode ended).
+    this step, same layout), ``episode_stats`` (a dict of (E,) tensors, :data:`roshan.episode.EPISODE_FIELDS`),
+    ``episode_fire`` (the fire at the episode's end, :data:`roshan.episode.FIRE_FIELDS`) and ``_episode_stats``
+    (the (E,) bool mask of envs whose episode ended).
 
     A subclass defines :meth:`_take_simulators` (its bundle from :mod:`roshan.kernels.pool`), calls
     :meth:`_allocate_buffers`, and defines :meth:`_views`, :meth:`_kernel_obs` and :meth:`_advance`.
@@ -42,6 +43,7 @@ class VectorEnvCore(gym.vector.VectorEnv):
     flat_drones = True
     failure_reasons = ("collision", "boundary", "timeout")  # the failures an episode record can hold
     default_caption_name = "FlyAgent"  # who flies, in the caption of rendered frames (caption_name)
+    has_reward = True  # False where the controller earns no reward (the greedy heuristic): reports leave it out
 
     def __init__(self, num_envs: int, config: Config | None, seed: int | None, render_mode: str | None):
         ensure_taichi()
@@ -78,13 +80,14 @@ class VectorEnvCore(gym.vector.VectorEnv):
         self._final_buf = torch.zeros_like(self._obs_buf)
         self._rewards = torch.zeros((E, *reward_shape), dtype=torch.float32, device=dev)
         self._dones = torch.zeros((E, 2), dtype=torch.uint8, device=dev)
-        self._episode = torch.zeros((E, len(EPISODE_FIELDS)), dtype=torch.float32, device=dev)
+        self._episode = torch.zeros((E, len(RECORD_FIELDS)), dtype=torch.float32, device=dev)
         self._obs = self._views(self._obs_buf)
         done_bool = self._dones.view(torch.bool)
         self.terminations, self.truncations = done_bool[:, 0], done_bool[:, 1]
         # "episode_stats", not "episode": gymnasium's RecordEpisodeStatistics writes info["episode"] itself.
         self._info = {"final_obs": self._views(self._final_buf),
-                      "episode_stats": {k: self._episode[:, i] for i, k in enumerate(EPISODE_FIELDS)}}
+                      "episode_stats": {k: self._episode[:, i] for i, k in enumerate(EPISODE_FIELDS)},
+                      "episode_fire": {k: self._episode[:, RECORD_FIELDS.index(k)] for k in FIRE_FIELDS}}
 
     def _batched_spaces(self) -> None:
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, self.num_envs)

@@ -29,7 +29,8 @@ class FlyVectorEnv(VectorEnvCore):
 
     ``info`` holds ``final_obs`` (the observation of envs that ended this step, same layout), ``episode_stats``
     (a dict of (E,) tensors: success, reason index into :data:`REASONS`, steps, burned_fraction, extinguished,
-    return) and ``_episode_stats`` (the (E,) bool mask of envs whose episode ended).
+    return), ``episode_fire`` (burning_fraction, lit_fraction at the end) and ``_episode_stats`` (the (E,) bool
+    mask of envs whose episode ended).
 
     With ``FlyConfig.frame_skips = k`` one ``step`` applies the actions for k physics steps (fewer when the
     episode ends inside them) and returns the last step's rewards (the episode ``return`` sums those); step

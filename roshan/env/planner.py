@@ -45,7 +45,9 @@ class PlannerVectorEnv(VectorEnvCore):
     """
 
     flat_drones = False  # one decision per env: (E, N) candidate indices
-    failure_reasons = VectorEnvCore.failure_reasons + ("burnout",)
+    # The frozen FlyAgents fly the drones and the planner's records end only by timeout or burnout
+    # (kernels/planner.py): no collision or boundary rows in its reports.
+    failure_reasons = ("timeout", "burnout")
 
     def __init__(self, num_envs: int = 1, config: Config | None = None, planner: PlannerConfig | None = None,
                  evaluation: bool = False, controller: str = "planner", seed: int | None = None,
@@ -56,6 +58,7 @@ class PlannerVectorEnv(VectorEnvCore):
         self.planner_config = pc = planner or PlannerConfig()
         self.controller, self.evaluation = controller, evaluation
         self.default_caption_name = controller
+        self.has_reward = controller != "greedy"  # the heuristic's episodes return 0: no reward is computed
         ensure_taichi()  # the frozen policies act on the simulator's torch device
         self.fly_policy = fly_policy or FrozenFlyPolicy(pc.fly_model, torch_device())
         self.explorer_policy = None

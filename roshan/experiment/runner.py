@@ -236,12 +236,13 @@ def execute_run(run: Run, folder: Path, extra: tuple[str, ...] = (), progress_ba
         if not checkpoint_path(folder, "latest").is_file():
             dump_config(cfg, folder / "config.yaml")
         trained = train(cfg, folder, resume=True, progress_bar=progress_bar, evaluate_at_end=False)
-    episodes = evaluate(run, cfg, folder)
+    episodes, reasons = evaluate(run, cfg, folder)
     ev_dir = folder / "eval" / f"{cond.eval_seed}-{cond.eval_episodes}"
     provenance = {"experiment": str(folder.parent.parent.name), "run": run.key, "config": cond.config,
                   "overrides": [*cond.sets, *extra, f"sim.seed={run.seed}"], "code": code_version()}
-    summary = write_outputs(episodes, ev_dir, f"{run.key} ({len(episodes['reward'])} episodes, seed {cond.eval_seed})",
-                            provenance)
+    who = f"{cfg.train.algo} policy" if cond.trains else cond.controller
+    summary = write_outputs(episodes, ev_dir, f"{run.key} ({len(episodes['time'])} episodes, seed {cond.eval_seed})",
+                            provenance, reasons, cfg.fire.dt, who)
     result = {
         "run": run.key, "condition": cond.name, "seed": run.seed, "controller": cond.controller,
         "episodes": summary["episodes"], "eval_seed": cond.eval_seed, "success_rate": summary["success_rate"],
@@ -256,9 +257,9 @@ def execute_run(run: Run, folder: Path, extra: tuple[str, ...] = (), progress_ba
     return result
 
 
-def evaluate(run: Run, cfg: Config, folder: Path) -> dict:
+def evaluate(run: Run, cfg: Config, folder: Path) -> tuple[dict, tuple[str, ...]]:
     """The condition's evaluation episodes (the same for every seed) with the run's best weights, or the
-    scripted controller."""
+    scripted controller; and the failures its records can hold."""
     cond = run.condition
     E = max(1, min(cond.eval_envs or cfg.train.eval_envs, cond.eval_episodes))
     if cond.trains:
@@ -268,7 +269,7 @@ def evaluate(run: Run, cfg: Config, folder: Path) -> dict:
         env = make_env(cfg, E, cond.eval_seed, evaluation=True, controller=cond.controller)
         act = _idle(E, env.num_drones)
     try:
-        return run_episodes(env, act, cond.eval_episodes, cond.eval_seed)
+        return run_episodes(env, act, cond.eval_episodes, cond.eval_seed), env.failure_reasons
     finally:
         env.close()
 

@@ -1,26 +1,30 @@
 """Episode bookkeeping shared by the task kernels of every level: the record (:mod:`roshan.episode`) written
 when an episode ends, the per-env counters, and the same-step autoreset kernel.
 
-One record row per env, ``EPISODE_FIELDS`` in order; valid where the episode ended this step.
+One record row per env, ``RECORD_FIELDS`` in order; valid where the episode ended this step.
 """
 
 import taichi as ti
 
-from roshan.episode import EPISODE_FIELDS
+from roshan.episode import RECORD_FIELDS
 
-EP_SUCCESS, EP_REASON, EP_STEPS, EP_BURNED, EP_EXTINGUISHED, EP_RETURN = (EPISODE_FIELDS.index(k) for k in (
-    "success", "reason", "steps", "burned_fraction", "extinguished", "return"))
+EP_SUCCESS, EP_REASON, EP_STEPS, EP_BURNED, EP_EXTINGUISHED, EP_RETURN, EP_BURNING, EP_LIT = (
+    RECORD_FIELDS.index(k) for k in ("success", "reason", "steps", "burned_fraction", "extinguished", "return",
+                                     "burning_fraction", "lit_fraction"))
 
 
 @ti.func
 def write_record(episode: ti.template(), fire: ti.template(), e, success, reason, steps, ret):
-    """Env e's record: outcome, steps, burned fraction and extinguished cells of its fire, and its return."""
+    """Env e's record: outcome, steps, its fire (fractions of the map burned out, burning now and ever lit;
+    extinguished cells as a count) and its return."""
     episode[e, EP_SUCCESS] = ti.cast(success, ti.f32)
     episode[e, EP_REASON] = ti.cast(reason, ti.f32)
     episode[e, EP_STEPS] = ti.cast(steps, ti.f32)
     episode[e, EP_BURNED] = ti.cast(fire.burned_count(e), ti.f32) / fire.num_cells
     episode[e, EP_EXTINGUISHED] = ti.cast(fire.extinguished_count(e), ti.f32)
     episode[e, EP_RETURN] = ret
+    episode[e, EP_BURNING] = ti.cast(fire.burning_count(e), ti.f32) / fire.num_cells
+    episode[e, EP_LIT] = ti.cast(fire.lit_count(e), ti.f32) / fire.num_cells
 
 
 @ti.data_oriented

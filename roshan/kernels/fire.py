@@ -40,7 +40,7 @@ NEVER = -1.0  # tau_ign of cells that cannot ignite (the reference skips their e
 # A row is padded to 16 ints = one 64-byte cache line, so threads stepping neighbouring envs do not write
 # to the same line (false sharing halved two-thread throughput below ~1000 envs).
 (N_BURNING, N_EXPOSED, N_FLOODED, N_CONV, N_RAD, N_BURNED, N_DROP_CONV, N_DROP_RAD, N_EXTINGUISHED,
- N_IGNITED_INIT, N_IGNITION_SHORT, N_STEP) = range(12)
+ N_IGNITED_INIT, N_IGNITION_SHORT, N_STEP, N_LIT) = range(13)
 N_COUNTS = 16
 STAT_NAMES = {
     "burning": N_BURNING,
@@ -122,6 +122,9 @@ class FireSim:
         self.exposed = ti.field(ti.i32, (E, N))  # also the generator's BFS queue
         self.flooded = ti.field(ti.i32, (E, N))
         self.mark = ti.field(ti.i32, (E, N))  # generator scratch: used / visited-by-cluster
+        # 1 once the cell has burned this episode. The cell state cannot say it: an extinguished cell is FLOODED
+        # (as is a flooded unburned one) and returns to its class when the flood drains. Counted in N_LIT.
+        self.lit = ti.field(ti.u8, (E, N))
         self.cand = ti.field(ti.i32, (E, 8))  # generator scratch: Moore neighbour candidates
         self.counts = ti.field(ti.i32, (E, N_COUNTS))
         self.conv = ti.Vector.field(pt.CONV_FIELDS, ti.f32, (E, self.conv_capacity))
@@ -227,6 +230,10 @@ class FireSim:
         c = self.counts.to_numpy()
         return {name: c[:, col].copy() for name, col in STAT_NAMES.items()}
 
+    def lit_counts(self) -> np.ndarray:
+        """(E,) distinct cells lit since each env's reset (burning, burned out or extinguished since)."""
+        return self.counts.to_numpy()[:, N_LIT].copy()
+
     def state(self, env: int = 0) -> np.ndarray:
         """Cell states of one env as a (rows, cols) int32 array (class id, or 12/13/14 burning/burned/flooded)."""
         return self.cells.to_numpy()[env, :, C_STATE].reshape(self.rows, self.cols)
@@ -261,7 +268,7 @@ class FireSim:
 
     def memory_bytes_per_env(self) -> int:
         """Bytes of Taichi field memory one env holds (cells, lists, particle pools)."""
-        per_cell = 4 * (CELL_FIELDS + 4) + 8 * TIMER_FIELDS
+        per_cell = 4 * (CELL_FIELDS + 4) + 8 * TIMER_FIELDS + 1
         return (self.num_cells * per_cell + 4 * (pt.CONV_FIELDS * self.conv_capacity
                                                  + pt.RAD_FIELDS * self.rad_capacity) + 4 * (N_COUNTS + 8))
 
@@ -373,6 +380,12 @@ class FireSim:
         return self.counts[e, N_BURNED]
 
     @ti.func
+    def lit_count(self, e) -> ti.i32:
+        """Distinct cells lit since the reset (burning, burned out or extinguished now, or extinguished and
+        returned to their class by a drained flood)."""
+        return self.counts[e, N_LIT]
+
+    @ti.func
     def extinguished_count(self, e) -> ti.i32:
         """Burning cells put out by water since the reset."""
         return self.counts[e, N_EXTINGUISHED]
@@ -417,6 +430,7 @@ class FireSim:
         """
         self.cells[e, c] = ti.Vector([self.land[c], 0, -1, 0], ti.i32)
         self.mark[e, c] = 0
+        self.lit[e, c] = ti.u8(0)
 
     @ti.func
     def _draw_durations(self, e, c):
@@ -567,6 +581,9 @@ class FireSim:
     def _ignite(self, e, c):
         self._draw_durations(e, c)
         self.cells[e, c][C_STATE] = BURNING
+        if self.lit[e, c] == 0:
+            self.lit[e, c] = ti.u8(1)
+            self.counts[e, N_LIT] += 1
         n = self.counts[e, N_BURNING]
         self.burning[e, n] = c
         self.counts[e, N_BURNING] = n + 1

@@ -23,7 +23,7 @@ from roshan.checkpoints import resolve_checkpoint
 from roshan.config import apply_overrides
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import straight_to_goal
-from roshan.episode import EPISODE_FIELDS, REASONS
+from roshan.episode import EPISODE_FIELDS, FIRE_FIELDS, REASONS, RECORD_FIELDS
 from roshan.io import OutputError, prepare_output, write_gif, writing
 from roshan.runs.collect import next_observation
 from roshan.runs.envs import make_env
@@ -41,10 +41,15 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
                  progress_bar: bool = False, on_step=None) -> dict[str, np.ndarray]:
     """Run ``episodes`` whole episodes with ``act(obs_batch) -> actions`` and return their records.
 
-    Returns a dict of arrays: reward, time, success, reason (str), burned, extinguished, env, index.
+    Returns a dict of arrays: reward (absent where the env's controller earns none, ``env.has_reward``), time
+    (steps), success, reason (str), the fire at the end: burned (burned out), burning and lit (ever lit) as
+    fractions of the map's cells and extinguished (cells); env, index.
     ``on_step(obs, actions, rewards, terms, truncs, info)`` is called after every step (buffer recording).
     With ``frames_dir`` the frames of env 0's first episode are written there: frame 0 is the state right after
     the reset and the last frame the episode's final state (rendered before the same-step autoreset).
+
+    The progress bar counts episodes, and moves with the steps too: each env's running episode adds the
+    fraction of its step limit it has used (capped below one), so a batch of long episodes does not sit at 0.
     """
     E, N = env.num_envs, env.num_drones
     quota = math.ceil(episodes / E)
@@ -56,7 +61,13 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
         env.keep_final_frame = True
         _save_frame(env.render(), frames_dir, frame)
         frame += 1
-    bar = tqdm(total=quota * E, unit="episode", disable=not progress_bar, desc="eval")
+    bar = tqdm(total=quota * E, unit="episode", disable=not progress_bar, desc="eval",
+               bar_format="{l_bar}{bar}| {n:.1f}/{total_fmt} episodes [{elapsed}<{remaining}]")
+    steps = torch.zeros(E, dtype=torch.long)  # steps of each env's running episode, for the bar
+    # env steps an episode may last: t_max counts physics steps, of which an env step runs frame_skips
+    # (FlyAgent) or interval (planner)
+    per_step = getattr(env, "interval", None) or env.fly_config.frame_skips
+    t_max = max(1, math.ceil(env.t_max / per_step))
     flat = env.flat_drones  # FlyAgent policies see drones as a batch
     while int(done_count.min()) < quota:
         actions = act(flatten_drones(obs)).view(E, N, 2) if flat else act(obs)
@@ -70,20 +81,35 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
             frame += 1
             env.keep_final_frame = not env_zero_ended
         if bool(ended.any()):
-            stats = torch.stack([info["episode_stats"][k] for k in EPISODE_FIELDS], dim=-1).cpu().numpy()
+            stats = torch.stack([info["episode_stats"][k] for k in EPISODE_FIELDS]
+                                + [info["episode_fire"][k] for k in FIRE_FIELDS], dim=-1).cpu().numpy()
             for e in ended.nonzero().flatten().tolist():
                 if done_count[e] < quota:
                     rows[e].append(stats[e])
                     done_count[e] += 1
-                    bar.update(1)
+        if progress_bar:
+            steps += 1
+            steps[ended.cpu()] = 0
+            _advance_bar(bar, done_count, steps, quota, t_max)
     bar.close()
     env.keep_final_frame = False
     kept = [(e, i, r) for e in range(E) for i, r in enumerate(rows[e])][:episodes]
-    col = lambda name: np.array([r[EPISODE_FIELDS.index(name)] for _, _, r in kept])  # noqa: E731
-    return {"reward": col("return"), "time": col("steps").astype(int), "success": col("success").astype(int),
-            "reason": np.array([REASONS[int(v)] for v in col("reason")]), "burned": col("burned_fraction"),
-            "extinguished": col("extinguished").astype(int), "env": np.array([e for e, _, _ in kept]),
-            "index": np.array([i for _, i, _ in kept])}
+    col = lambda name: np.array([r[RECORD_FIELDS.index(name)] for _, _, r in kept])  # noqa: E731
+    out = {"reward": col("return"), "time": col("steps").astype(int), "success": col("success").astype(int),
+           "reason": np.array([REASONS[int(v)] for v in col("reason")]), "burned": col("burned_fraction"),
+           "burning": col("burning_fraction"), "lit": col("lit_fraction"),
+           "extinguished": col("extinguished").astype(int), "env": np.array([e for e, _, _ in kept]),
+           "index": np.array([i for _, i, _ in kept])}
+    if not env.has_reward:
+        del out["reward"]
+    return out
+
+
+def _advance_bar(bar, done_count: torch.Tensor, steps: torch.Tensor, quota: int, t_max: int) -> None:
+    """Finished episodes plus each unfinished env's share of its running one (steps / step limit, below 1)."""
+    running = torch.where(done_count < quota, (steps.float() / t_max).clamp(max=0.99), torch.zeros(()))
+    n = float(done_count.clamp(max=quota).sum()) + float(running.sum())
+    bar.update(n - bar.n)
 
 
 def _save_frame(picture: np.ndarray, frames_dir: Path, k: int) -> None:
@@ -94,6 +120,19 @@ def _save_frame(picture: np.ndarray, frames_dir: Path, k: int) -> None:
 
 
 BASELINES = ("random", "greedy")
+# Where training and evaluation differ by design, the learning curves say why.
+TRAINING_NOTES = {"planner": "Training episodes (Episodes/*) sample goals from the stochastic policy with the "
+                             "explorers at the groundstation, and time out: success 0 by design. Evaluation "
+                             "(Evaluation/*) takes the argmax goal with the explorers flying."}
+
+
+def _say(line: str) -> None:
+    """A line about a slow phase, printed above any progress bar."""
+    tqdm.write(line)
+
+
+def _quiet(line: str) -> None:
+    pass
 
 
 def baseline_fn(name: str, num_envs: int, num_drones: int, seed: int):
@@ -196,30 +235,47 @@ def _provenance(target, path: Path, which: str, seed: int, episodes: int, num_en
             "episodes": episodes, "envs": num_envs, "baseline": baseline, "arch": arch, "code": code_version()}
 
 
-def write_outputs(episodes: dict, out_dir: Path, title: str, provenance: dict | None = None) -> dict:
-    """episodes.csv, summary.json (with ``provenance``) and the plots in ``out_dir``; returns the summary."""
+def write_outputs(episodes: dict, out_dir: Path, title: str, provenance: dict | None = None,
+                  reasons: tuple[str, ...] = ("collision", "boundary", "timeout"), dt: float | None = None,
+                  who: str | None = None, say=_quiet) -> dict:
+    """episodes.csv, summary.json (with ``provenance``) and the plots in ``out_dir``; returns the summary.
+    ``reasons`` are the failures the controller's records can hold (``env.failure_reasons``), ``dt`` the seconds
+    per step (TTE in seconds), ``who`` the controller named in the plot titles; ``say(line)`` announces the slow
+    part (the plots)."""
     with writing("evaluation files", out_dir):
-        return _write_outputs(episodes, out_dir, title, provenance)
+        return _write_outputs(episodes, out_dir, title, provenance, reasons, dt, who, say)
 
 
-def _write_outputs(episodes: dict, out_dir: Path, title: str, provenance: dict | None) -> dict:
+def _write_outputs(episodes: dict, out_dir: Path, title: str, provenance, reasons, dt, who, say) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
-    summary = summarize(episodes)
+    summary = summarize(episodes, reasons=reasons, dt=dt)
     if provenance is not None:
         summary["provenance"] = provenance
     write_episodes_csv(episodes, out_dir / "episodes.csv")
     write_summary_json(summary, out_dir / "summary.json")
-    plot_episodes(episodes, out_dir)
+    say(f"writing plots of {who or 'the evaluation'} to {out_dir}")
+    plot_episodes(episodes, out_dir, reasons=reasons, who=who)
     (out_dir / "table.txt").write_text(format_table(summary, title) + "\n")
     return summary
 
 
+def write_learning_curves(run_dir: Path, path: Path, title: str, algo: str, say=_quiet) -> None:
+    """The run's learning curves from its TensorBoard events (nothing where it has none), with the note of
+    ``TRAINING_NOTES`` where training and evaluation differ by design."""
+    tb = run_dir / "tb"
+    scalars = read_tensorboard_scalars(tb) if tb.is_dir() else {}
+    if scalars:
+        say(f"writing learning curves to {path}")
+        plot_learning_curves(scalars, path, title=title, note=TRAINING_NOTES.get(algo))
+
+
 def flyagent_json(summary: dict, reasons: tuple[str, ...] = ("collision", "boundary", "timeout")) -> dict:
-    """The issue's eval JSON: episodes, success_rate, failure_rates (the env's ``failure_reasons``: collision,
-    boundary, timeout; the planner adds burnout), tte."""
+    """The issue's eval JSON: episodes, success_rate, failure_rates (collision, boundary, timeout, and the env's
+    other ``failure_reasons``: the planner adds burnout; a reason the env cannot have reads 0), tte (steps)."""
     fr = summary["failure_rates"]
+    keys = ("collision", "boundary", "timeout", *(r for r in reasons if r not in ("collision", "boundary", "timeout")))
     return {"episodes": summary["episodes"], "success_rate": summary["success_rate"],
-            "failure_rates": {k: fr.get(k, 0.0) for k in reasons},
+            "failure_rates": {k: fr.get(k, 0.0) for k in keys},
             "tte": {k: summary["tte"][k] for k in ("mean", "std", "median")}}
 
 
@@ -271,18 +327,17 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         base_eps = run_episodes(env, baseline_fn(baseline, E, env.num_drones, seed), episodes, seed,
                                 progress_bar=progress_bar)
     env.close()
-    summary = write_outputs(eps, out, f"{run_dir.name} ({path.stem}, {len(eps['reward'])} episodes, seed {seed})",
-                            provenance)
-    tb = run_dir / "tb"
-    if tb.is_dir():
-        scalars = read_tensorboard_scalars(tb)
-        if scalars:
-            plot_learning_curves(scalars, out / "learning_curves.png")
+    say = _say if progress_bar else _quiet
+    who, reasons, dt = f"{cfg.train.algo} policy", env.failure_reasons, cfg.fire.dt
+    summary = write_outputs(eps, out, f"{run_dir.name} ({path.stem}, {len(eps['time'])} episodes, seed {seed})",
+                            provenance, reasons, dt, who, say)
+    write_learning_curves(run_dir, out / "learning_curves.png", f"{run_dir.name}: {who}", cfg.train.algo, say)
     payload = flyagent_json(summary, env.failure_reasons)
     if base_eps is not None:
-        base = write_outputs(base_eps, out / baseline, f"{baseline} baseline ({len(base_eps['reward'])} episodes, "
-                                                         f"seed {seed})", provenance)
-        plot_comparison({"policy": eps, baseline: base_eps}, out)
+        base = write_outputs(base_eps, out / baseline, f"{baseline} baseline ({len(base_eps['time'])} episodes, "
+                                                         f"seed {seed})", provenance, reasons, dt,
+                           f"{baseline} baseline", say)
+        plot_comparison({who: eps, baseline: base_eps}, out, reasons=reasons)
         payload = {"policy": payload, baseline: flyagent_json(base, env.failure_reasons)}
         summary["baseline"] = base
     payload["provenance"] = provenance
@@ -290,6 +345,7 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         with writing("the evaluation JSON", json_path):
             Path(json_path).write_text(json.dumps(payload, indent=2) + "\n")
     if gif_path is not None:
+        say(f"writing the GIF {gif_path}")
         with writing("the GIF", gif_path):
             write_gif(sorted(Path(frames_dir).glob("frame_*.png")), Path(gif_path))
     if scratch is not None:

@@ -44,9 +44,10 @@ from roshan.episode import EPISODE_FIELDS, FAILURES, REASONS
 from roshan.io import OutputError, prepare_output, writing
 from roshan.runs.collect import PPOLearner, next_observation, rollout_steps
 from roshan.runs.envs import make_env
-from roshan.runs.evaluate import evaluate_run, run_episodes
+from roshan.runs.evaluate import TRAINING_NOTES, evaluate_run, run_episodes
 from roshan.runs.report.stats import evaluation_scalars, summarize
 from roshan.runs.report.tables import format_table
+from roshan.runs.tboard import EpisodeFrames, add_config, add_hparams, add_video
 from roshan.runtime import current_arch, ensure_taichi, init_taichi, torch_device
 
 # ------------------------------------------------------------------------------------------------ episodes
@@ -240,6 +241,8 @@ class Trainer:
         self.env = make_env(cfg, cfg.sim.envs, seed=cfg.sim.seed + 7919 * self.progress.updates)
         self.learner = make_learner(cfg, self.env, self.agent)
         self.eval_env = None
+        self.last_eval: dict | None = None  # the summary of the last periodic evaluation
+        self.stopped_by: str | None = None  # the budget that ended the run (stop_reason)
         self.writer = self._open_writer(resumed=resume_state is not None)
 
     @property
@@ -256,7 +259,21 @@ class Trainer:
         if resumed:
             writer.add_text("Run/resumed", f"resumed at update {self.progress.updates} ({self.progress.env_steps:,} "
                                            f"env steps): `{shlex.join(sys.argv)}`", self.log_step)
+        add_config(writer, config_dict(self.cfg), self.log_step)
+        if self.cfg.train.algo in TRAINING_NOTES:
+            writer.add_text("Run/note", TRAINING_NOTES[self.cfg.train.algo], self.log_step)
         return writer
+
+    def _final_metrics(self) -> dict[str, float]:
+        """The HParams tab's metrics: the best and last evaluation, the training objective, the budget spent."""
+        p, last = self.progress, self.last_eval or {}
+        out = {"best_eval_success": p.best_eval, "objective": self.episodes.objective,
+               "env_steps": float(p.env_steps), "minutes": p.seconds / 60.0}
+        if last:
+            out["last_eval_success"] = last["success_rate"]
+            out["last_eval_tte"] = last["tte"]["mean"]
+            out.update({f"last_eval_{r}_rate": v for r, v in last["failure_rates"].items()})
+        return out
 
     def _init_weights(self, target: str) -> None:
         """Fine-tuning: the networks (not optimisers, counters or the reward scaler) of another run's checkpoint."""
@@ -290,10 +307,18 @@ class Trainer:
     # ------------------------------------------------------------------------------------------ budget
 
     def done(self) -> bool:
+        return self.stop_reason() is not None
+
+    def stop_reason(self) -> str | None:
+        """Which budget is spent, in words naming its key (None while none is)."""
         tc, p = self.cfg.train, self.progress
-        return ((tc.total_steps > 0 and p.env_steps >= tc.total_steps)
-                or (tc.max_updates > 0 and p.updates >= tc.max_updates)
-                or (tc.max_minutes > 0 and p.seconds >= 60.0 * tc.max_minutes))
+        if tc.total_steps > 0 and p.env_steps >= tc.total_steps:
+            return f"train.total_steps = {tc.total_steps:,} reached ({p.env_steps:,} env steps)"
+        if tc.max_updates > 0 and p.updates >= tc.max_updates:
+            return f"train.max_updates = {tc.max_updates} reached"
+        if tc.max_minutes > 0 and p.seconds >= 60.0 * tc.max_minutes:
+            return f"train.max_minutes = {tc.max_minutes:g} reached ({p.seconds / 60.0:.1f} min)"
+        return None
 
     def _bar(self):
         tc = self.cfg.train
@@ -312,7 +337,13 @@ class Trainer:
         try:
             while not self.done():
                 self._update(bar)
+            self.stopped_by = self.stop_reason()
+            if self.progress_bar:
+                bar.write(f"{self.run_dir.name}: training stopped: {self.stopped_by}")
             with writing("TensorBoard events", self.run_dir / "tb"):
+                self.writer.add_text("Run/stopped", f"training stopped at update {self.progress.updates}: "
+                                                    f"{self.stopped_by}", self.log_step)
+                add_hparams(self.writer, config_dict(self.cfg), self._final_metrics())
                 self.writer.close()  # flushes the last events: a full disk can show only here
         except OutputError as exc:
             raise self._stopped(exc) from None
@@ -338,8 +369,9 @@ class Trainer:
             self._periodic_eval()  # before _checkpoint, so that latest carries the new best_eval
         self._checkpoint(metrics["rewards_raw"])
         bar.update(steps if bar.total else 1)
-        bar.set_postfix(sps=f"{steps / dt:,.0f}", success=f"{self.episodes.success_so_far:.2f}",
-                        R=f"{metrics['rewards_raw']:+.3f}", refresh=False)
+        # one speed readout: tqdm's own rate (steps/s, or updates/s where the bar counts updates)
+        bar.set_postfix(success=f"{self.episodes.success_so_far:.2f}", R=f"{metrics['rewards_raw']:+.3f}",
+                        refresh=False)
         if self.on_update is not None:
             self.on_update({"updates": p.updates, "env_steps": p.env_steps,
                             "objective": self.episodes.objective, "reward": metrics["rewards_raw"]})
@@ -379,7 +411,7 @@ class Trainer:
             w.add_scalar("Episodes/success_rate", ep["success"], step)
             w.add_scalar("Episodes/return", ep["return"], step)
             w.add_scalar("Sanitylogs/Episode_Steps", ep["steps"], step)
-            for name in FAILURES:
+            for name in self.env.failure_reasons:  # only the failures this level's records can hold
                 w.add_scalar(f"Episodes/{name}_rate", ep[f"{name}_rate"], step)
         if len(self.episodes.recent) >= self.episodes.window:
             w.add_scalar("Training/Objective", self.episodes.objective, step)
@@ -390,11 +422,19 @@ class Trainer:
         tc, seed = self.cfg.train, self.cfg.sim.seed + 10_000
         if self.eval_env is None:
             self.eval_env = make_env(self.cfg, min(tc.eval_envs, tc.eval_episodes), seed=seed, evaluation=True)
-        episodes = run_episodes(self.eval_env, policy_fn(self.agent), tc.eval_episodes, seed=seed, progress_bar=False)
-        summary = summarize(episodes)
+        env = self.eval_env
+        frames = None
+        if tc.eval_video_frames > 0:  # env 0's first episode, every k-th step
+            per_step = getattr(env, "interval", None) or env.fly_config.frame_skips
+            frames = EpisodeFrames(env, tc.eval_video_frames, math.ceil(env.t_max / per_step))
+        episodes = run_episodes(env, policy_fn(self.agent), tc.eval_episodes, seed=seed, progress_bar=False,
+                                on_step=frames.on_step if frames else None)
+        summary = self.last_eval = summarize(episodes, reasons=env.failure_reasons, dt=self.cfg.fire.dt)
         with writing("TensorBoard events", self.run_dir / "tb"):  # the writer thread's failure shows at any add
             for tag, value in evaluation_scalars(summary).items():
                 self.writer.add_scalar(tag, value, self.log_step)
+            if frames is not None and frames.frames:
+                add_video(self.writer, "Evaluation/episode_env0", frames.frames, self.log_step)
         # The deterministic policy is what gets shipped, and in the collision setting it can be much better or worse
         # than the stochastic training objective says: keep the weights that evaluated best.
         if summary["success_rate"] >= self.progress.best_eval:
@@ -474,7 +514,8 @@ def train(cfg: Config, run_dir: Path, resume: bool = False, progress_bar: bool =
         state = resume_state(run_dir, cfg) if resume else None
         trainer = Trainer(cfg, run_dir, state, progress_bar, on_update)
         progress = trainer.run()
-    result = {"run_dir": str(run_dir), **progress.state_dict(), "train_episodes": trainer.episodes.episodes}
+    result = {"run_dir": str(run_dir), **progress.state_dict(), "train_episodes": trainer.episodes.episodes,
+              "stopped_by": trainer.stopped_by}
     if evaluate_at_end:
         # the run's own evaluation sits in RUN/eval itself (a resume re-evaluates and replaces it); `roshan eval`
         # writes named folders next to it
@@ -528,6 +569,8 @@ def result_lines(res: dict) -> str:
     mins = res["seconds"] / 60.0
     head = (f"{res['run_dir']}: {res['updates']} updates, {res['env_steps']:,} env steps, {mins:.1f} min "
             f"({res['env_steps'] / max(res['seconds'], 1e-9):,.0f} env-steps/s), {res['train_episodes']} episodes")
+    if res.get("stopped_by"):
+        head += f"; stopped: {res['stopped_by']}"
     if "eval" not in res:
         return head
     return head + "\n" + format_table(res["eval"], f"evaluation of {Path(res['run_dir']).name}")

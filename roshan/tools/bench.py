@@ -203,36 +203,46 @@ def time_fire(land, fire_percentage: float, envs: int, steps: int, warmup: int, 
 
 
 def fire_speed(env_counts=(1, 16, 64, 256, 1024), steps: int = 50_000, warmup: int = 100, big: bool = True,
-               arch: str = "cpu", threads: int | None = None) -> dict:
-    """The fire benchmark of BENCHMARKS.md: 35x36_Woods at 1.5 % and 35 % for each E, then big maps (E = 1)."""
-    runs = []
+               arch: str = "cpu", threads: int | None = None, on_row=None) -> dict:
+    """The fire benchmark of BENCHMARKS.md: 35x36_Woods at 1.5 % and 35 % for each E, then big maps (E = 1).
+    ``on_row(row)`` is called as each run finishes (a long benchmark shows its rows as they come)."""
     woods = load_map("35x36_Woods")
-    for pct in (0.015, 0.35):
-        for e in env_counts:
-            runs.append(time_fire(woods, pct, e, steps, warmup))
+    jobs = [(woods, pct, e) for pct in (0.015, 0.35) for e in env_counts]
     if big:
-        runs.append(time_fire(load_map("Borkenberge"), 0.015, 1, steps, warmup))
-        runs.append(time_fire(tiled_map(), 0.015, 1, steps, warmup))
-    for r in runs:
+        jobs += [(load_map("Borkenberge"), 0.015, 1), (tiled_map(), 0.015, 1)]
+    runs = []
+    for land, pct, e in jobs:
+        r = time_fire(land, pct, e, steps, warmup)
         orig = ORIGINAL_STEPS_PER_S.get((r["map"], r["fire_percentage"]))
         r["original_steps_per_s"] = orig
         r["speedup_vs_original"] = r["env_steps_per_s"] / orig if orig else None
+        runs.append(r)
+        if on_row is not None:
+            on_row(r)
     return {"arch": arch, "threads": threads or os.cpu_count(), "cpu_count": os.cpu_count(), "runs": runs}
+
+
+FIRE_SPEED_HEADER = (f"{'map':<16}{'cells':>9}{'ign':>7}{'E':>6}{'env-steps/s':>14}{'burning upd/s':>15}"
+                     f"{'x original':>12}{'KiB/env':>9}{'dropped':>9}")
+
+
+def format_fire_row(r: dict) -> str:
+    """One run of :func:`fire_speed` as a line under ``FIRE_SPEED_HEADER``."""
+    sp = f"{r['speedup_vs_original']:.1f}" if r["speedup_vs_original"] else "-"
+    return (f"{r['map']:<16}{r['cells']:>9}{r['fire_percentage'] * 100:>6.1f}%{r['envs']:>6}"
+            f"{r['env_steps_per_s']:>14,.0f}{r['burning_cell_updates_per_s']:>15,.0f}{sp:>12}"
+            f"{r['memory_bytes_per_env'] / 1024:>9.1f}{r['dropped']:>9}")
 
 
 def format_fire_speed(report: dict) -> str:
     lines = [f"arch {report['arch']}, threads {report['threads']} (cpu_count {report['cpu_count']})",
-             f"{'map':<16}{'cells':>9}{'ign':>7}{'E':>6}{'env-steps/s':>14}{'burning upd/s':>15}"
-             f"{'x original':>12}{'KiB/env':>9}{'dropped':>9}"]
+             FIRE_SPEED_HEADER]
     base = {}
     for r in report["runs"]:
         key = (r["map"], r["fire_percentage"])
         if r["envs"] == 1:
             base[key] = r["env_steps_per_s"]
-        sp = f"{r['speedup_vs_original']:.1f}" if r["speedup_vs_original"] else "-"
-        lines.append(f"{r['map']:<16}{r['cells']:>9}{r['fire_percentage'] * 100:>6.1f}%{r['envs']:>6}"
-                     f"{r['env_steps_per_s']:>14,.0f}{r['burning_cell_updates_per_s']:>15,.0f}{sp:>12}"
-                     f"{r['memory_bytes_per_env'] / 1024:>9.1f}{r['dropped']:>9}")
+        lines.append(format_fire_row(r))
     for (m, p), one in base.items():
         scale = [r for r in report["runs"] if (r["map"], r["fire_percentage"]) == (m, p) and r["envs"] > 1]
         if scale:
@@ -357,8 +367,10 @@ def time_training(envs: int, drones: int, fire_percentage: float, steps: int, ne
 
 
 def env_speed(env_counts=(1, 64, 256, 1024, 4096), drones: int = 4, fire_percentages=(0.015, 0.35),
-              policies=(None, "simple", "collision"), min_env_steps: int = 200_000, max_steps: int = 2000) -> dict:
-    """The env benchmark: steps per run chosen so each run makes >= ``min_env_steps`` env-steps (capped)."""
+              policies=(None, "simple", "collision"), min_env_steps: int = 200_000, max_steps: int = 2000,
+              on_row=None) -> dict:
+    """The env benchmark: steps per run chosen so each run makes >= ``min_env_steps`` env-steps (capped).
+    ``on_row(row)`` is called as each run finishes."""
     runs = []
     for pct in fire_percentages:
         for e in env_counts:
@@ -366,13 +378,20 @@ def env_speed(env_counts=(1, 64, 256, 1024, 4096), drones: int = 4, fire_percent
             for pol in policies:
                 steps_pol = steps if pol in (None, "simple") else max(16, steps // 4)  # the slow networks
                 runs.append(time_env(e, drones, pct, steps_pol, pol))
+                if on_row is not None:
+                    on_row(runs[-1])
     return {"threads": os.cpu_count(), "runs": runs, "original_eval_env_steps_per_s": ORIGINAL_FLY_EVAL_STEPS_PER_S}
 
 
+ENV_SPEED_HEADER = f"{'ign':>6}{'E':>6}{'policy':>15}{'env-steps/s':>14}{'agent-steps/s':>15}{'x original':>12}"
+
+
+def format_env_row(r: dict) -> str:
+    """One run of :func:`env_speed` as a line under ``ENV_SPEED_HEADER``."""
+    return (f"{r['fire_percentage'] * 100:>5.1f}%{r['envs']:>6}{r['policy']:>15}"
+            f"{r['env_steps_per_s']:>14,.0f}{r['agent_steps_per_s']:>15,.0f}"
+            f"{r['env_steps_per_s'] / ORIGINAL_FLY_EVAL_STEPS_PER_S:>12.1f}")
+
+
 def format_env_speed(report: dict) -> str:
-    lines = [f"{'ign':>6}{'E':>6}{'policy':>15}{'env-steps/s':>14}{'agent-steps/s':>15}{'x original':>12}"]
-    for r in report["runs"]:
-        lines.append(f"{r['fire_percentage'] * 100:>5.1f}%{r['envs']:>6}{r['policy']:>15}"
-                     f"{r['env_steps_per_s']:>14,.0f}{r['agent_steps_per_s']:>15,.0f}"
-                     f"{r['env_steps_per_s'] / report['original_eval_env_steps_per_s']:>12.1f}")
-    return "\n".join(lines)
+    return "\n".join([ENV_SPEED_HEADER, *(format_env_row(r) for r in report["runs"])])

@@ -97,11 +97,12 @@ def run_simulation(cfg: Config, steps: int, every: int = 100, frames_dir: Path |
             result.frames.append(renderer.save_png(frames_dir / _frame_name(rec["step"], rec["time_s"])))
         if bar is not None:
             bar.update(n)
-            bar.set_postfix(burning=int(np.sum(rec["burning"])), particles=int(np.sum(rec["convection"])
-                                                                                + np.sum(rec["radiation"])))
+            # means per env, as in the summary (a sum over envs grows with --envs)
+            bar.set_postfix({"burning/env": f"{np.mean(rec['burning']):.1f}",
+                             "particles/env": f"{np.mean(rec['convection']) + np.mean(rec['radiation']):.0f}"})
     if bar is not None:
         bar.close()
-    _finish_frames(renderer, result, gif, scratch)
+    _finish_frames(renderer, result, gif, scratch, progress)
     result.timing = _timing(steps, cfg.sim.envs, t_reset, sim_seconds, sim.memory_bytes_per_env(), t0)
     return result
 
@@ -193,11 +194,11 @@ def run_drone_simulation(cfg: Config, steps: int, drones: int, policy: str = "gr
         save_frame(rec)
         if bar is not None:
             bar.update(n)
-            bar.set_postfix(burning=int(np.sum(rec["burning"])), episodes=int(np.sum(rec["episodes"])))
+            bar.set_postfix({"burning/env": f"{np.mean(rec['burning']):.1f}", "episodes": int(np.sum(rec["episodes"]))})
     if bar is not None:
         bar.close()
     env.close()
-    _finish_frames(renderer, result, gif, scratch)
+    _finish_frames(renderer, result, gif, scratch, progress)
     result.timing = _timing(steps, cfg.sim.envs, t_reset, step_seconds, env.fire.memory_bytes_per_env(), t0)
     result.drones = _drone_summary(result.series[-1], int(drones), policy, fly, env.t_max)
     return result
@@ -254,11 +255,16 @@ def _frames_dir(frames_dir: Path | None) -> tuple[Path, Path | None]:
     return scratch, scratch
 
 
-def _finish_frames(renderer, result: SimulationResult, gif: Path | None, scratch: Path | None = None) -> None:
+def _finish_frames(renderer, result: SimulationResult, gif: Path | None, scratch: Path | None = None,
+                   progress: bool = False) -> None:
     if renderer is not None:
         renderer.close()
         try:
             if gif is not None:
+                if progress:
+                    from tqdm import tqdm
+
+                    tqdm.write(f"writing the GIF {gif} ({len(result.frames)} frames)")
                 with writing("the GIF", gif):
                     result.gif = write_gif(result.frames, Path(gif))
         finally:

@@ -95,4 +95,6 @@ def test_bench_env_runs_on_a_tiny_budget(tmp_path):
     assert r.exit_code == 0, r.output
     runs = json.loads(out.read_text())["runs"]
     assert [run["policy"] for run in runs] == ["random", "simple", "fly_collision"]
+    # each row is printed (stderr) as its run finishes, not only in the table at the end
+    assert "timing 3 runs" in r.stderr and len([line for line in r.stderr.splitlines() if "%" in line]) == 3
     assert all(run["env_steps_per_s"] > 0 and run["agent_steps_per_s"] == 2 * run["env_steps_per_s"] for run in runs)

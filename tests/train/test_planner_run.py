@@ -50,5 +50,12 @@ def test_planner_trains_resumes_and_evaluates_against_greedy_on_the_same_episode
         assert part["tte"]["mean"] > 0 and part["tte"]["median"] > 0
     (folder,) = (run / "eval").glob("5-4-*")  # the baseline is a setting of its own: a hashed folder name
     assert (folder / "episodes.csv").is_file() and (folder / "greedy" / "episodes.csv").is_file()
+    # tables show what each controller measured: the heuristic earns no reward; neither can collide or exit
+    greedy, planner = (folder / "greedy" / "table.txt").read_text(), (folder / "table.txt").read_text()
+    assert "Reward" not in greedy and "Reward (episode return)" in planner
+    for table in (greedy, planner):
+        assert "Collision rate" not in table and "Boundary rate" not in table and "Burnout rate" in table
+        assert "TTE (s)" in table and "Ever lit (% of cells)" in table
+    assert not (folder / "greedy" / "reward_vs_episode.png").exists()
     assert gif.read_bytes()[:6] == b"GIF89a"
     assert [p.name for p in gif.parent.iterdir()] == ["episode.gif"]  # the GIF's frames were scratch files

@@ -12,8 +12,12 @@ REASONS = ("none", "timeout", "boundary", "burnout", "collision")
 CSV_REASON_NAMES = {"none": "None", "timeout": "Timeout", "boundary": "BoundaryExit", "burnout": "Burnout",
                     "collision": "Collision"}
 _REASON_ALIASES = {**{r: r for r in REASONS}, **{name.lower(): r for r, name in CSV_REASON_NAMES.items()}}
-_REQUIRED = ("reward", "time", "success", "reason")
-_OPTIONAL = ("burned", "seed", "episode")
+_REQUIRED = ("time", "success", "reason")
+# reward is optional: a controller that earns none (the greedy heuristic) has no reward column, so no table row
+# or plot pretends it scored 0. The fire at the end, as fractions of the map's cells: burned (burned out),
+# burning (still burning) and lit (ever lit: burning, burned out or extinguished); extinguished is a cell count.
+_OPTIONAL = ("reward", "burned", "burning", "lit", "extinguished", "seed", "episode")
+FRACTIONS = ("burned", "burning", "lit")
 # Outcome categories in display order. "unspecified" is a failed episode whose reason is "none": the reference
 # takes the reason of the last terminal agent, which can be None although another agent failed (agents.md 2).
 ALWAYS_REPORTED = ("collision", "boundary", "timeout")
@@ -26,14 +30,16 @@ def validate_episodes(episodes: Mapping[str, Sequence]) -> dict[str, np.ndarray]
     """Checks an episode set and returns it as typed numpy columns.
 
     Args:
-        episodes: equal-length 1-D arrays or lists: ``reward`` (float), ``time`` (int steps, TTE), ``success``
-            (0/1), ``reason`` (one of ``REASONS``; the reference names of ``CSV_REASON_NAMES`` are accepted too,
-            any case), and optionally ``burned`` (fraction 0..1), ``seed`` and ``episode`` (int ids). Other keys
-            are ignored.
+        episodes: equal-length 1-D arrays or lists: ``time`` (int steps, TTE), ``success`` (0/1), ``reason`` (one
+            of ``REASONS``; the reference names of ``CSV_REASON_NAMES`` are accepted too, any case), and
+            optionally ``reward`` (float; absent for a controller that earns none), the fire at the end as
+            fractions 0..1 of the map's cells ``burned`` (burned out), ``burning`` and ``lit`` (ever lit),
+            ``extinguished`` (int cells), ``seed`` and ``episode`` (int ids). Other keys are ignored.
 
     Returns:
-        A new dict with those of the keys above that were given: float64 ``reward``/``burned``, int64
-        ``time``/``success``/``seed``/``episode``, and ``reason`` as an array of the canonical names in ``REASONS``.
+        A new dict with those of the keys above that were given: float64 ``reward`` and fractions, int64
+        ``time``/``success``/``extinguished``/``seed``/``episode``, and ``reason`` as an array of the canonical
+        names in ``REASONS``.
 
     Raises:
         ValueError: naming the key, for a missing key, an array that is not 1-D, arrays of different
@@ -54,18 +60,24 @@ def validate_episodes(episodes: Mapping[str, Sequence]) -> dict[str, np.ndarray]
     lengths = {k: len(c) for k, c in cols.items()}
     if len(set(lengths.values())) > 1:
         raise ValueError(f"episodes: arrays have different lengths {lengths}")
-    if lengths["reward"] == 0:
+    if lengths["time"] == 0:
         raise ValueError("episodes: empty episode set (every array has length 0)")
 
-    out = {"reward": _float_column(cols, "reward"), "time": _int_column(cols, "time", minimum=0)}
+    out = {"time": _int_column(cols, "time", minimum=0)}
     out["success"] = _int_column(cols, "success", minimum=0, maximum=1)
     out["reason"] = _reason_column(cols["reason"], out["success"])
-    if "burned" in cols:
-        out["burned"] = _float_column(cols, "burned", minimum=0.0, maximum=1.0)
-    for key in ("seed", "episode"):
-        if key in cols:
-            out[key] = _int_column(cols, key)
+    readers = {"reward": _float_column, **dict.fromkeys(FRACTIONS, _fraction_column),
+               "extinguished": _count_column, "seed": _int_column, "episode": _int_column}
+    out.update({key: read(cols, key) for key, read in readers.items() if key in cols})
     return out
+
+
+def _fraction_column(cols: dict, key: str) -> np.ndarray:
+    return _float_column(cols, key, minimum=0.0, maximum=1.0)
+
+
+def _count_column(cols: dict, key: str) -> np.ndarray:
+    return _int_column(cols, key, minimum=0)
 
 
 def _float_column(cols: dict, key: str, minimum: float = -math.inf, maximum: float = math.inf) -> np.ndarray:

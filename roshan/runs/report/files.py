@@ -14,27 +14,35 @@ import numpy as np
 from roshan.io import write_atomic
 from roshan.runs.report.episodes import CSV_REASON_NAMES, validate_episodes
 
+# Value columns: CSV name -> episode key, in file order (all but Time optional). Percent_Burned is the
+# reference's name for the burned-out fraction (0..1, not a percentage); the other fire columns follow it.
+_VALUE_COLUMNS = (("Reward", "reward"), ("Time", "time"), ("Percent_Burned", "burned"),
+                 ("Burning_Fraction", "burning"), ("Lit_Fraction", "lit"), ("Extinguished", "extinguished"))
+
 
 def write_episodes_csv(episodes: Mapping[str, Sequence], path: str | os.PathLike) -> Path:
     """Writes ``evaluation_stats.csv`` (learning.md 12), atomically.
 
-    Columns: ``Episode, Reward, Time, [Percent_Burned], Success, Failure_Reason, [Seed]``. Episode is the
-    ``episode`` id if given, else 1..n; Failure_Reason uses the reference names (``CSV_REASON_NAMES``, "None" for
-    successes). Floats are written with ``repr`` so that :func:`read_episodes_csv` gives them back exactly.
+    Columns: ``Episode, [Reward], Time, [Percent_Burned, Burning_Fraction, Lit_Fraction, Extinguished], Success,
+    Failure_Reason, [Seed]``, bracketed ones where the episodes have them (no Reward for a controller that earns
+    none). Episode is the ``episode`` id if given, else 1..n; Failure_Reason uses the reference names
+    (``CSV_REASON_NAMES``, "None" for successes). Floats are written with ``repr`` so that
+    :func:`read_episodes_csv` gives them back exactly.
     """
     ep = validate_episodes(episodes)
-    n = len(ep["reward"])
+    n = len(ep["time"])
     ids = ep.get("episode", np.arange(1, n + 1))
-    has_burned, has_seed = "burned" in ep, "seed" in ep
-    header = ["Episode", "Reward", "Time", *(["Percent_Burned"] if has_burned else []), "Success", "Failure_Reason",
-              *(["Seed"] if has_seed else [])]
+    cols = [(name, key) for name, key in _VALUE_COLUMNS if key in ep]
+    has_seed = "seed" in ep
+    header = ["Episode", *(name for name, _ in cols), "Success", "Failure_Reason", *(["Seed"] if has_seed else [])]
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
     writer.writerow(header)
     for i in range(n):
-        row = [int(ids[i]), repr(float(ep["reward"][i])), int(ep["time"][i])]
-        if has_burned:
-            row.append(repr(float(ep["burned"][i])))
+        row = [int(ids[i])]
+        for _, key in cols:
+            v = ep[key][i]
+            row.append(int(v) if ep[key].dtype.kind == "i" else repr(float(v)))
         row += [int(ep["success"][i]), CSV_REASON_NAMES[ep["reason"][i]]]
         if has_seed:
             row.append(int(ep["seed"][i]))
@@ -42,8 +50,8 @@ def write_episodes_csv(episodes: Mapping[str, Sequence], path: str | os.PathLike
     return write_atomic(path, buf.getvalue().encode())
 
 
-_CSV_COLUMNS = {"Reward": "reward", "Time": "time", "Success": "success", "Failure_Reason": "reason",
-                "Percent_Burned": "burned", "Seed": "seed", "Episode": "episode"}
+_CSV_COLUMNS = {**dict(_VALUE_COLUMNS), "Success": "success", "Failure_Reason": "reason", "Seed": "seed",
+                "Episode": "episode"}
 
 
 def read_episodes_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
@@ -59,7 +67,7 @@ def read_episodes_csv(path: str | os.PathLike) -> dict[str, np.ndarray]:
         reader = csv.DictReader(f)
         header = reader.fieldnames or []
         rows = list(reader)
-    missing = [c for c in ("Reward", "Time", "Success", "Failure_Reason") if c not in header]
+    missing = [c for c in ("Time", "Success", "Failure_Reason") if c not in header]
     if missing:
         raise ValueError(f"{path}: missing column(s) {missing}; found {header}")
     cols = {key: [row[col] for row in rows] for col, key in _CSV_COLUMNS.items() if col in header}

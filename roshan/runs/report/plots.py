@@ -5,6 +5,7 @@ its baselines, and learning curves. An Agg canvas per figure, no pyplot state.
 import io
 import math
 import os
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -49,10 +50,10 @@ def _finish(ax, path: Path, title: str, ylabel: str, xlabel: str | None = None, 
     return _save(ax.figure, path)
 
 
-def _finish_ecdf(ax, path: Path) -> Path:
+def _finish_ecdf(ax, path: Path, who: str | None = None) -> Path:
     """The finish of the time-to-end ECDFs, of one run and of a comparison alike."""
-    return _finish(ax, path, "Time to end, ECDF", "fraction of episodes", xlabel=_TTE_LABEL, ylim=(0, 1.02),
-                   legend=True)
+    return _finish(ax, path, _titled("time to end, ECDF", who), "fraction of episodes", xlabel=_TTE_LABEL,
+                   ylim=(0, 1.02), legend=True)
 
 
 def _ecdf(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -61,34 +62,42 @@ def _ecdf(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate([x[:1], x]), np.arange(x.size + 1) / x.size
 
 
-def _categories(outcome_sets: Sequence[np.ndarray]) -> list[str]:
-    """Success and the always-reported reasons, plus burnout / unspecified where any run has them."""
+def _categories(outcome_sets: Sequence[np.ndarray], reasons: Sequence[str] = ALWAYS_REPORTED) -> list[str]:
+    """Success and the controller's failure reasons, plus burnout / unspecified where any run has them."""
     present = set().union(*(set(o) for o in outcome_sets))
-    return ["success", *ALWAYS_REPORTED, *(r for r in IF_PRESENT if r in present)]
+    return ["success", *reasons, *(r for r in IF_PRESENT if r in present and r not in reasons)]
 
 
-def _plot_outcome_bar(ep: dict, path: Path) -> Path:
+def _titled(title: str, who: str | None) -> str:
+    """A plot title that says which controller it shows."""
+    return f"{who}: {title}" if who else title[:1].upper() + title[1:]
+
+
+def _plot_outcome_bar(ep: dict, path: Path, reasons: Sequence[str], who: str | None) -> Path:
     outcome = outcome_categories(ep)
-    cats = _categories([outcome])
+    cats = _categories([outcome], reasons)
     counts = [int(np.sum(outcome == c)) for c in cats]
     fig = _new_figure()
     ax = fig.add_subplot()
     bars = ax.bar([LABELS[c] for c in cats], counts, color=[_COLORS[c] for c in cats])
     ax.bar_label(bars)
-    return _finish(ax, path, f"Episode outcomes (n = {outcome.size})", "episodes")
+    from matplotlib.ticker import MaxNLocator
+
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))  # counts of episodes
+    return _finish(ax, path, _titled(f"episode outcomes (n = {outcome.size})", who), "episodes")
 
 
-def _plot_tte_hist(ep: dict, path: Path) -> Path:
+def _plot_tte_hist(ep: dict, path: Path, reasons: Sequence[str], who: str | None) -> Path:
     is_success = ep["success"] == 1
     bins = np.histogram_bin_edges(ep["time"], bins=min(30, max(5, int(np.sqrt(ep["time"].size)))))
     fig = _new_figure()
     ax = fig.add_subplot()
     ax.hist([ep["time"][is_success], ep["time"][~is_success]], bins=bins, stacked=True,
             color=[_COLORS["success"], _COLORS["collision"]], label=["Success", "Failure"])
-    return _finish(ax, path, "Time to end", "episodes", xlabel=_TTE_LABEL, legend=True)
+    return _finish(ax, path, _titled("time to end", who), "episodes", xlabel=_TTE_LABEL, legend=True)
 
 
-def _plot_tte_ecdf(ep: dict, path: Path) -> Path:
+def _plot_tte_ecdf(ep: dict, path: Path, reasons: Sequence[str], who: str | None) -> Path:
     is_success = ep["success"] == 1
     fig = _new_figure()
     ax = fig.add_subplot()
@@ -96,10 +105,10 @@ def _plot_tte_ecdf(ep: dict, path: Path) -> Path:
                               ("Failure", ~is_success, _COLORS["collision"])):
         if mask.any():
             ax.step(*_ecdf(ep["time"][mask]), where="post", color=color, label=f"{name} (n = {int(mask.sum())})")
-    return _finish_ecdf(ax, path)
+    return _finish_ecdf(ax, path, who)
 
 
-def _plot_reward_vs_episode(ep: dict, path: Path) -> Path:
+def _plot_reward_vs_episode(ep: dict, path: Path, reasons: Sequence[str], who: str | None) -> Path:
     n = ep["reward"].size
     x = ep.get("episode", np.arange(1, n + 1))
     is_success = ep["success"] == 1
@@ -110,31 +119,33 @@ def _plot_reward_vs_episode(ep: dict, path: Path) -> Path:
     ax.scatter(x[is_success], ep["reward"][is_success], s=12, color=_COLORS["success"], label="Success")
     ax.scatter(x[~is_success], ep["reward"][~is_success], s=12, color=_COLORS["collision"], label="Failure")
     ax.plot(x[window - 1:], running, color="black", label=f"running mean ({window})")
-    return _finish(ax, path, "Reward per episode", "episode reward", xlabel="episode", legend=True)
+    return _finish(ax, path, _titled("reward per episode", who), "episode return", xlabel="episode", legend=True)
 
 
-def _plot_success_bar(ep: dict, path: Path) -> Path:
+def _plot_success_bar(ep: dict, path: Path, reasons: Sequence[str], who: str | None) -> Path:
     n, k = ep["success"].size, int(ep["success"].sum())
     lo, hi = wilson_interval(k, n)
     rate = k / n
     fig = _new_figure(3.2, 4.0)
     ax = fig.add_subplot()
     ax.bar(["Success"], [rate], yerr=[[rate - lo], [hi - rate]], capsize=8, color=_COLORS["success"])
-    return _finish(ax, path, f"{100 * rate:.1f} % of {n}", "success rate (Wilson 95 % CI)", ylim=(0, 1))
+    return _finish(ax, path, _titled(f"{100 * rate:.1f} % of {n}", who), "success rate (Wilson 95 % CI)",
+                   ylim=(0, 1))
 
 
-def _plot_reward_vs_time(ep: dict, path: Path) -> Path:
+def _plot_reward_vs_time(ep: dict, path: Path, reasons: Sequence[str], who: str | None) -> Path:
     outcome = outcome_categories(ep)
     fig = _new_figure()
     ax = fig.add_subplot()
-    for cat in _categories([outcome]):
+    for cat in _categories([outcome], reasons):
         mask = outcome == cat
         if mask.any():
             ax.scatter(ep["time"][mask], ep["reward"][mask], s=12, color=_COLORS[cat], label=LABELS[cat])
-    return _finish(ax, path, "Reward against time to end", "episode reward", xlabel=_TTE_LABEL, legend=True)
+    return _finish(ax, path, _titled("reward against time to end", who), "episode return", xlabel=_TTE_LABEL,
+                   legend=True)
 
 
-def _plot_success_vs_time(ep: dict, path: Path) -> Path:
+def _plot_success_vs_time(ep: dict, path: Path, reasons: Sequence[str], who: str | None) -> Path:
     # Success rate per TTE bin: shows whether the policy succeeds early and fails late (timeouts) or otherwise.
     edges = np.histogram_bin_edges(ep["time"], bins=min(20, max(3, int(np.sqrt(ep["time"].size)))))
     which = np.clip(np.digitize(ep["time"], edges[1:-1]), 0, edges.size - 2)
@@ -144,32 +155,42 @@ def _plot_success_vs_time(ep: dict, path: Path) -> Path:
     fig = _new_figure()
     ax = fig.add_subplot()
     ax.bar(edges[:-1], rate, width=np.diff(edges), align="edge", color=_COLORS["success"], edgecolor="white")
-    return _finish(ax, path, "Success against time to end", "success rate in bin", xlabel=_TTE_LABEL,
-                   ylim=(0, 1))
+    return _finish(ax, path, _titled("success against time to end", who), "success rate in bin",
+                   xlabel=_TTE_LABEL, ylim=(0, 1))
 
 
 _EPISODE_PLOTS = {"failure_reasons_bar.png": _plot_outcome_bar, "time_to_end_hist.png": _plot_tte_hist,
                   "time_to_end_ecdf.png": _plot_tte_ecdf, "reward_vs_episode.png": _plot_reward_vs_episode,
                   "overall_success_bar.png": _plot_success_bar, "reward_vs_time.png": _plot_reward_vs_time,
                   "success_vs_time.png": _plot_success_vs_time}
+_REWARD_PLOTS = ("reward_vs_episode.png", "reward_vs_time.png")
 
 
-def plot_episodes(episodes: Mapping[str, Sequence], out_dir: str | os.PathLike) -> list[Path]:
+def plot_episodes(episodes: Mapping[str, Sequence], out_dir: str | os.PathLike,
+                  reasons: Sequence[str] = ALWAYS_REPORTED, who: str | None = None) -> list[Path]:
     """The single-run plots of learning.md 12, as PNGs in ``out_dir``.
 
     Files: failure_reasons_bar.png (outcome counts, None shown as Success), time_to_end_hist.png,
     time_to_end_ecdf.png, reward_vs_episode.png, overall_success_bar.png (Wilson 95 % CI as error bar),
-    reward_vs_time.png, success_vs_time.png.
+    reward_vs_time.png, success_vs_time.png. The reward plots only where the episodes have a reward.
+
+    Args:
+        episodes: an episode set (:func:`validate_episodes`).
+        out_dir: folder for the PNGs.
+        reasons: the failure reasons the controller's records can hold: a bar each in the outcome plot.
+        who: the controller, named in every title (e.g. "planner", "greedy").
 
     Returns:
         The written paths, in that order.
     """
     ep = validate_episodes(episodes)
     out_dir = Path(out_dir)
-    return [plot(ep, out_dir / name) for name, plot in _EPISODE_PLOTS.items()]
+    return [plot(ep, out_dir / name, reasons, who) for name, plot in _EPISODE_PLOTS.items()
+            if "reward" in ep or name not in _REWARD_PLOTS]
 
 
-def plot_comparison(runs: Mapping[str, Mapping[str, Sequence]], out_dir: str | os.PathLike) -> list[Path]:
+def plot_comparison(runs: Mapping[str, Mapping[str, Sequence]], out_dir: str | os.PathLike,
+                    reasons: Sequence[str] = ALWAYS_REPORTED) -> list[Path]:
     """Policy against baseline(s): one colour per run.
 
     Files: comparison_failure_reasons.png (grouped bars of outcome fractions), comparison_time_to_end_ecdf.png
@@ -178,6 +199,7 @@ def plot_comparison(runs: Mapping[str, Mapping[str, Sequence]], out_dir: str | o
     Args:
         runs: run name -> episode set, e.g. ``{"policy": eps, "greedy": eps_greedy}``.
         out_dir: folder for the PNGs.
+        reasons: the failure reasons the runs' records can hold: a group of bars each.
 
     Returns:
         The written paths, in that order.
@@ -186,14 +208,14 @@ def plot_comparison(runs: Mapping[str, Mapping[str, Sequence]], out_dir: str | o
         raise ValueError("plot_comparison: no runs given")
     eps = {str(name): validate_episodes(e) for name, e in runs.items()}
     out_dir = Path(out_dir)
-    return [_plot_comparison_outcomes(eps, out_dir / "comparison_failure_reasons.png"),
+    return [_plot_comparison_outcomes(eps, out_dir / "comparison_failure_reasons.png", reasons),
             _plot_comparison_ecdf(eps, out_dir / "comparison_time_to_end_ecdf.png"),
             _plot_comparison_success(eps, out_dir / "comparison_success_bar.png")]
 
 
-def _plot_comparison_outcomes(eps: dict[str, dict], path: Path) -> Path:
+def _plot_comparison_outcomes(eps: dict[str, dict], path: Path, reasons: Sequence[str]) -> Path:
     outcomes = {name: outcome_categories(ep) for name, ep in eps.items()}
-    cats = _categories(list(outcomes.values()))
+    cats = _categories(list(outcomes.values()), reasons)
     width = 0.8 / len(eps)
     fig = _new_figure(max(6.4, 0.6 * len(cats) * len(eps)), 4.0)
     ax = fig.add_subplot()
@@ -223,32 +245,130 @@ def _plot_comparison_success(eps: dict[str, dict], path: Path) -> Path:
     return _finish(ax, path, "Success rate", "success rate (Wilson 95 % CI)", ylim=(0, 1))
 
 
+# Learning-curve panels: (title, y label, y range, tag patterns). A tag goes to the first panel with a matching
+# pattern; an interval's bounds (``*_ci_low`` / ``*_ci_high``) shade the band of their series instead of a
+# panel of their own, and ``*_std`` / ``*_median`` / ``*_n`` are left out (the mean and its band say it).
+_PANELS = (
+    ("Training episodes: outcomes", "fraction of episodes", (0.0, 1.02),
+     ("Episodes/success_rate", "Episodes/*_rate", "Training/Objective")),
+    ("Evaluation: outcomes (95 % CI shaded)", "fraction of episodes", (0.0, 1.02),
+     ("Evaluation/Success_rate", "Evaluation/*_rate")),
+    ("Episode return", "return", None, ("Episodes/return", "Evaluation/Reward_mean")),
+    ("Time to end", "steps", None, ("Sanitylogs/Episode_Steps", "Evaluation/Time_mean")),
+    ("Evaluation: fire at the end", "fraction of the map's cells", None, ("Evaluation/Percent_Burned_mean",
+                                                                          "Evaluation/Ever_Lit_mean")),
+    ("Rewards and value targets (per step)", "value", None, ("Rewards/*",)),
+    ("Losses", "loss", None, ("Training/*loss*", "*/*loss*")),
+    ("PPO diagnostics", "value", None, ("Training/Approx_KL", "Training/Clip_Fraction",
+                                        "Sanitylogs/Explained_Variance")),
+    ("Learning rate and policy log std", "value", None, ("Training/LR", "Training/log_std")),
+    ("Speed", "env steps / s", None, ("Perf/*",)),
+)
+_DERIVED = ("_ci_low", "_ci_high", "_std", "_median", "_n")
+
+
+def _band_tags(tag: str) -> tuple[str, str]:
+    """The interval bounds of a series: ``X_mean`` -> ``X_ci_low/high``, ``Evaluation/Success_rate`` -> Success_ci."""
+    base = tag.removesuffix("_mean").removesuffix("_rate")
+    return f"{base}_ci_low", f"{base}_ci_high"
+
+
+def _panel_of(tag: str) -> int | None:
+    from fnmatch import fnmatchcase
+
+    for i, (*_, patterns) in enumerate(_PANELS):
+        if any(fnmatchcase(tag, p) for p in patterns):
+            return i
+    return None
+
+
+def _pattern_rank(tag: str, panel: int | None) -> int:
+    from fnmatch import fnmatchcase
+
+    patterns = _PANELS[panel][3] if panel is not None else ()
+    return next((i for i, p in enumerate(patterns) if fnmatchcase(tag, p)), len(patterns))
+
+
+def _group_tags(tags) -> list[tuple[str, str, tuple | None, list[str]]]:
+    """The non-empty panels in order, then "Other" (tags no panel claims), each with its series (in the order of
+    the panel's patterns: success before the failure rates)."""
+    groups: dict[int | None, list[str]] = {}
+    for tag in tags:
+        if tag.endswith(_DERIVED) and not tag.endswith("_rate"):
+            continue
+        groups.setdefault(_panel_of(tag), []).append(tag)
+    for panel, members in groups.items():
+        members.sort(key=lambda t, p=panel: (_pattern_rank(t, p), t))
+    out = [(*_PANELS[i][:3], groups[i]) for i in range(len(_PANELS)) if i in groups]
+    if None in groups:
+        out.append(("Other", "value", None, groups[None]))
+    return out
+
+
+def _series_label(tag: str) -> str:
+    """``Evaluation/Reward_mean`` -> "eval: Reward", ``Episodes/success_rate`` -> "train: success_rate"."""
+    group, _, name = tag.removesuffix("_mean").rpartition("/")
+    special = {"Sanitylogs/Episode_Steps": "train: episode steps", "Evaluation/Percent_Burned_mean": "eval: burned out",
+               "Evaluation/Ever_Lit_mean": "eval: ever lit", "Evaluation/Time_mean": "eval: time to end"}
+    if tag in special:
+        return special[tag]
+    return {"Evaluation": f"eval: {name}", "Episodes": f"train: {name}"}.get(group, name or tag)
+
+
 def plot_learning_curves(scalars: Mapping[str, Sequence[tuple[int, float]]], out_path: str | os.PathLike,
-                         ncols: int = 3) -> Path:
-    """A grid of small line plots, one per tag (e.g. from :func:`read_tensorboard_scalars`).
+                         ncols: int = 4, title: str | None = None, note: str | None = None,
+                         xlabel: str = "env steps") -> Path:
+    """Learning curves as a few grouped panels (outcomes, return, time to end, fire, rewards, losses, PPO
+    diagnostics, speed, other), each with labelled axes and a legend; confidence bounds are shaded bands.
 
     Args:
-        scalars: tag -> [(step, value), ...].
+        scalars: tag -> [(step, value), ...] (e.g. from :func:`read_tensorboard_scalars`).
         out_path: the PNG to write.
         ncols: panels per row.
+        title: the figure's title (say which run and controller).
+        note: a line under the title, e.g. why training and evaluation differ by design.
+        xlabel: what the step axis counts.
 
     Returns:
         ``out_path`` as a Path.
     """
+    from matplotlib.ticker import EngFormatter, MaxNLocator
+
     if not scalars:
         raise ValueError("plot_learning_curves: no scalar tags given")
-    ncols = max(1, min(ncols, len(scalars)))
-    nrows = math.ceil(len(scalars) / ncols)
-    fig = _new_figure(3.2 * ncols, 2.4 * nrows)
+    panels = _group_tags(scalars)
+    ncols = max(1, min(ncols, len(panels)))
+    nrows = math.ceil(len(panels) / ncols)
+    fig = _new_figure(4.4 * ncols, 3.0 * nrows + (0.5 if note else 0.0))
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
-    for ax, (tag, points) in zip(axes, scalars.items(), strict=False):
-        if len(points):
-            steps, values = zip(*points, strict=True)
-            ax.plot(steps, values, linewidth=1, marker="." if len(points) < 30 else None)
-        else:
-            ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
-        ax.set_title(tag, fontsize=8)
+    for ax, (panel_title, ylabel, ylim, tags) in zip(axes, panels, strict=False):
+        for j, tag in enumerate(tags):
+            points = scalars[tag]
+            if not len(points):
+                continue
+            steps, values = (np.asarray(v) for v in zip(*points, strict=True))
+            color = f"C{j % 10}"
+            ax.plot(steps, values, linewidth=1.2, color=color, label=_series_label(tag),
+                    marker="." if len(points) < 30 else None)
+            low, high = _band_tags(tag)
+            if low in scalars and high in scalars and len(scalars[low]) == len(points) == len(scalars[high]):
+                ax.fill_between(steps, [v for _, v in scalars[low]], [v for _, v in scalars[high]], color=color,
+                                alpha=0.2, linewidth=0)
+        ax.set_title(panel_title, fontsize=10)
+        ax.set_xlabel(xlabel, fontsize=8)
+        ax.set_ylabel(ylabel, fontsize=8)
+        if ylim is not None:
+            ax.set_ylim(*ylim)
+        ax.xaxis.set_major_locator(MaxNLocator(nbins=4))
+        ax.xaxis.set_major_formatter(EngFormatter(sep=""))
+        ax.ticklabel_format(axis="y", style="sci", scilimits=(-3, 4), useOffset=False)
         ax.tick_params(labelsize=7)
-    for ax in axes[len(scalars):]:
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=6, loc="best")
+    for ax in axes[len(panels):]:
         ax.set_axis_off()
+    if title or note:
+        lines = [title] if title else []
+        lines += textwrap.wrap(note, width=int(15 * fig.get_figwidth())) if note else []
+        fig.suptitle("\n".join(lines), fontsize=9)
     return _save(fig, Path(out_path))

@@ -124,33 +124,39 @@ def describe(values: Sequence[float], confidence: float = 0.95) -> dict:
     return {"mean": mean, "std": std, "median": float(np.median(x)), "ci": [mean - half, mean + half]}
 
 
-def failure_counts(episodes: Mapping[str, Sequence]) -> dict[str, int]:
-    """Failed episodes per reason: collision, boundary, timeout always; burnout and unspecified only if any."""
-    return _failure_counts(validate_episodes(episodes))
+def failure_counts(episodes: Mapping[str, Sequence], reasons: Sequence[str] = ALWAYS_REPORTED) -> dict[str, int]:
+    """Failed episodes per reason: every one of ``reasons`` (those the controller's records can hold), plus
+    burnout and unspecified if any."""
+    return _failure_counts(validate_episodes(episodes), reasons)
 
 
-def _failure_counts(ep: dict[str, np.ndarray]) -> dict[str, int]:
+def _failure_counts(ep: dict[str, np.ndarray], reasons: Sequence[str] = ALWAYS_REPORTED) -> dict[str, int]:
     outcome = outcome_categories(ep)
-    counts = {r: int(np.sum(outcome == r)) for r in ALWAYS_REPORTED}
-    counts.update({r: int(np.sum(outcome == r)) for r in IF_PRESENT if np.any(outcome == r)})
+    counts = {r: int(np.sum(outcome == r)) for r in reasons}
+    counts.update({r: int(np.sum(outcome == r)) for r in IF_PRESENT if r not in counts and np.any(outcome == r)})
     return counts
 
 
-def summarize(episodes: Mapping[str, Sequence], confidence: float = 0.95) -> dict:
+def summarize(episodes: Mapping[str, Sequence], confidence: float = 0.95, reasons: Sequence[str] = ALWAYS_REPORTED,
+              dt: float | None = None) -> dict:
     """Aggregates of an evaluation (agents.md 15), JSON-able.
 
     Args:
         episodes: an episode set as described in :func:`validate_episodes`.
         confidence: coverage of the Wilson and t intervals.
+        reasons: the failure reasons the controller's records can hold (an env's ``failure_reasons``); each gets
+            a rate, 0 or not. Burnout and unspecified are added where they occur.
+        dt: seconds per step, to give the TTE in seconds too.
 
     Returns:
-        ``{"episodes": n, "success_rate", "success_ci": [lo, hi] (Wilson), "failure_rates": {"collision",
-        "boundary", "timeout", and "burnout" / "unspecified" only if any}, "tte", "tte_success", "reward",
-        ["burned"]}``; rates are fractions of all n episodes, and each statistics entry is :func:`describe`
-        (``tte_success`` over successful episodes only).
+        ``{"episodes": n, "success_rate", "success_ci": [lo, hi] (Wilson), "failure_rates": {reason: rate},
+        "tte", "tte_success", ["tte_seconds"], ["reward"], ["burned", "burning", "lit", "extinguished"]}``;
+        rates are fractions of all n episodes, each statistics entry is :func:`describe` (``tte_success`` over
+        successful episodes only), fire fractions are fractions of the map's cells, extinguished a cell count.
+        A column the episodes lack (the greedy heuristic's reward) has no entry.
     """
     ep = validate_episodes(episodes)
-    n = len(ep["reward"])
+    n = len(ep["time"])
     is_success = ep["success"] == 1
     k = int(is_success.sum())
     lo, hi = wilson_interval(k, n, confidence)
@@ -158,22 +164,28 @@ def summarize(episodes: Mapping[str, Sequence], confidence: float = 0.95) -> dic
         "episodes": n,
         "success_rate": k / n,
         "success_ci": [lo, hi],
-        "failure_rates": {r: c / n for r, c in _failure_counts(ep).items()},
+        "failure_rates": {r: c / n for r, c in _failure_counts(ep, reasons).items()},
         "tte": describe(ep["time"], confidence),
         "tte_success": describe(ep["time"][is_success], confidence),
-        "reward": describe(ep["reward"], confidence),
     }
-    if "burned" in ep:
-        summary["burned"] = describe(ep["burned"], confidence)
+    if dt is not None:
+        summary["step_seconds"] = float(dt)
+        summary["tte_seconds"] = describe(ep["time"] * float(dt), confidence)
+    for key in ("reward", "burned", "burning", "lit", "extinguished"):
+        if key in ep:
+            summary[key] = describe(ep[key], confidence)
     return summary
 
 
 def evaluation_scalars(summary: dict) -> dict[str, float]:
-    """The ``Evaluation/*`` TensorBoard scalars of learning.md 11 from a :func:`summarize` result."""
+    """The ``Evaluation/*`` TensorBoard scalars of learning.md 11 from a :func:`summarize` result, plus the rate
+    of each failure reason (``Evaluation/<Reason>_rate``)."""
     scalars = {"Evaluation/Success_rate": summary["success_rate"],
                "Evaluation/Success_ci_low": summary["success_ci"][0],
                "Evaluation/Success_ci_high": summary["success_ci"][1], "Evaluation/Success_n": summary["episodes"]}
-    for key, name in (("reward", "Reward"), ("tte", "Time"), ("burned", "Percent_Burned")):
+    for reason, rate in summary["failure_rates"].items():
+        scalars[f"Evaluation/{reason.capitalize()}_rate"] = rate
+    for key, name in (("reward", "Reward"), ("tte", "Time"), ("burned", "Percent_Burned"), ("lit", "Ever_Lit")):
         if key in summary:
             s = summary[key]
             scalars.update({f"Evaluation/{name}_mean": s["mean"], f"Evaluation/{name}_std": s["std"],

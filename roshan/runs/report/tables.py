@@ -1,8 +1,19 @@
-"""Thesis-style plain-text tables of evaluation summaries: one run, or several side by side."""
+"""Thesis-style plain-text tables of evaluation summaries: one run, or several side by side.
+
+A table shows what was measured for its controller and nothing else: a failure row for each reason its records
+can hold (the summary's ``failure_rates``), a reward row only where the controller earns a reward, and units
+in every label (TTE in steps and seconds, the fire in % of the map's cells, extinguished cells as a count).
+"""
 
 from collections.abc import Mapping
 
-from roshan.runs.report.episodes import ALWAYS_REPORTED, IF_PRESENT, LABELS
+from roshan.runs.report.episodes import LABELS
+
+# Fire rows: summary key -> (label, scale, unit, decimals).
+FIRE_ROWS = {"burned": ("Burned out (% of cells)", 100.0, " %", 1),
+             "burning": ("Burning at end (% of cells)", 100.0, " %", 1),
+             "lit": ("Ever lit (% of cells)", 100.0, " %", 1),
+             "extinguished": ("Extinguished (cells)", 1.0, "", 1)}
 
 
 def _pct(x: float) -> str:
@@ -16,32 +27,37 @@ def _mean_std_median(stats: dict, decimals: int, scale: float = 1.0, unit: str =
     return f"{m:.{decimals}f} ± {s:.{decimals}f} ({med:.{decimals}f}){unit}"
 
 
+def _rate_label(reason: str) -> str:
+    return f"{LABELS[reason]} rate"
+
+
 def _row_values(summary: dict) -> dict[str, str]:
     """Row label -> formatted value, in display order."""
     lo, hi = summary["success_ci"]
     rows = {"Episodes": str(summary["episodes"]),
             "Success rate": f"{_pct(summary['success_rate'])} [{100 * lo:.1f}, {100 * hi:.1f}]"}
     for reason, rate in summary["failure_rates"].items():
-        rows[f"{LABELS[reason]} rate"] = _pct(rate)
-    rows["TTE"] = _mean_std_median(summary["tte"], 1)
-    rows["TTE (successes)"] = _mean_std_median(summary["tte_success"], 1)
-    rows["Reward"] = _mean_std_median(summary["reward"], 2)
-    if "burned" in summary:
-        rows["Burned"] = _mean_std_median(summary["burned"], 1, scale=100.0, unit=" %")
+        rows[_rate_label(reason)] = _pct(rate)
+    rows["TTE (steps)"] = _mean_std_median(summary["tte"], 1)
+    if "tte_seconds" in summary:
+        rows["TTE (s)"] = _mean_std_median(summary["tte_seconds"], 1)
+    rows["TTE of successes (steps)"] = _mean_std_median(summary["tte_success"], 1)
+    if "reward" in summary:
+        rows["Reward (episode return)"] = _mean_std_median(summary["reward"], 2)
+    for key, (label, scale, unit, decimals) in FIRE_ROWS.items():
+        if key in summary:
+            rows[label] = _mean_std_median(summary[key], decimals, scale=scale, unit=unit)
     return rows
 
 
-_ROW_ORDER = ("Episodes", "Success rate", *(f"{LABELS[r]} rate" for r in ALWAYS_REPORTED + IF_PRESENT), "TTE",
-              "TTE (successes)", "Reward", "Burned")
-
-
 def _render(title: str, headers: list[str], columns: list[dict[str, str]]) -> str:
-    labels = [label for label in _ROW_ORDER if any(label in col for col in columns)]
-    cells = []
-    for label in labels:
-        # A failure reason seen in only some runs did not occur in the others: 0 %, not "missing".
-        missing = _pct(0.0) if label.endswith(" rate") else "-"
-        cells.append([col.get(label, missing) for col in columns])
+    labels: list[str] = []
+    for col in columns:  # the first column's order, then rows only later columns have, after their predecessor
+        for i, label in enumerate(col):
+            if label not in labels:
+                before = list(col)[i - 1] if i else None
+                labels.insert(labels.index(before) + 1 if before in labels else len(labels), label)
+    cells = [[col.get(label, "-") for col in columns] for label in labels]  # "-": not measured for that column
     label_w = max(len("Metric"), *(len(label) for label in labels))
     widths = [max(len(h), *(len(row[i]) for row in cells)) for i, h in enumerate(headers)]
     header = "  ".join([f"{'Metric':<{label_w}}", *(f"{h:>{w}}" for h, w in zip(headers, widths, strict=True))])
@@ -54,8 +70,8 @@ def _render(title: str, headers: list[str], columns: list[dict[str, str]]) -> st
 def format_table(summary: dict, title: str = "Evaluation") -> str:
     """A thesis-style plain-text table of one :func:`summarize` result.
 
-    Rates are percentages (the success rate with its Wilson interval in brackets); TTE, reward and burned fraction
-    read "mean ± std (median)".
+    Rates are percentages (the success rate with its Wilson interval in brackets); TTE, reward and the fire read
+    "mean ± std (median)".
     """
     return _render(title, ["Value"], [_row_values(summary)])
 
@@ -63,9 +79,15 @@ def format_table(summary: dict, title: str = "Evaluation") -> str:
 def format_comparison(summaries: Mapping[str, dict], title: str = "Comparison") -> str:
     """Several :func:`summarize` results side by side, one column per name (e.g. ``{"policy": .., "greedy": ..}``).
 
-    Rows as in :func:`format_table`; a row missing from one summary reads "0.0 %" for a failure rate (the reason
-    did not occur) and "-" otherwise.
+    Rows as in :func:`format_table`. A failure reason one run's records can hold and another's cannot reads "-"
+    in the other, as does a quantity not measured there (the greedy heuristic's reward); "Unspecified" and
+    "Burnout" appear only where they occurred, so their absence in a column reads "0.0 %".
     """
     if not summaries:
         raise ValueError("format_comparison: no summaries given")
-    return _render(title, [str(name) for name in summaries], [_row_values(s) for s in summaries.values()])
+    columns = [_row_values(s) for s in summaries.values()]
+    for col in columns:
+        for reason in ("unspecified", "burnout"):
+            if any(_rate_label(reason) in other for other in columns):
+                col.setdefault(_rate_label(reason), _pct(0.0))
+    return _render(title, [str(name) for name in summaries], columns)
