@@ -364,7 +364,8 @@ def plot_learning_curves(scalars: Mapping[str, Sequence[tuple[int, float]]], out
         ax.ticklabel_format(axis="y", style="sci", scilimits=(-3, 4), useOffset=False)
         ax.tick_params(labelsize=7)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=6, loc="best")
+        if ax.get_legend_handles_labels()[0]:  # a panel whose only series is unlabelled needs no legend
+            ax.legend(fontsize=6, loc="best")
     for ax in axes[len(panels):]:
         ax.set_axis_off()
     if title or note:
