@@ -21,3 +21,20 @@ def make_map(classes, name="test"):
 
     return LandCoverMap(name=name, classes=np.asarray(classes, dtype=np.int32), cell_size=10.0, crs=None,
                         transform=None, source=None)
+
+
+def sim_with_fires(map_name: str, burning: list[tuple], num_envs: int = 1, seed: int = 1):
+    """A FireSim of a bundled map with no random fires, reset, with the cells of ``burning`` lit: each entry
+    indexes a (num_envs, rows, cols) mask, e.g. ``(0, 5, slice(5, 7))``."""
+    from roshan.config import IgnitionConfig
+    from roshan.kernels.fire import FireSim
+    from roshan.maps import load_map
+
+    init_taichi("cpu")
+    s = FireSim(load_map(map_name), ignition=IgnitionConfig(fire_percentage=0.0), num_envs=num_envs, seed=seed)
+    s.reset()
+    mask = np.zeros((num_envs, s.rows, s.cols), np.int32)
+    for index in burning:
+        mask[index] = 1
+    s.ignite_cells(mask.reshape(num_envs, -1))
+    return s

@@ -378,6 +378,13 @@ def _fill_rect(image: ti.template(), r0, r1, c0, c1, colour):
 
 
 @ti.func
+def _pixels_around(image: ti.template(), c, r):
+    """The image's pixel rows y0..y1 and columns x0..x1 (half-open) of the square of half-side r around c."""
+    return ti.Vector([ti.max(0, ti.floor(c[0] - r, ti.i32)), ti.min(image.shape[0], ti.ceil(c[0] + r, ti.i32)),
+                      ti.max(0, ti.floor(c[1] - r, ti.i32)), ti.min(image.shape[1], ti.ceil(c[1] + r, ti.i32))])
+
+
+@ti.func
 def _outline(image: ti.template(), r0, r1, c0, c1, t, colour):
     """A ``t``-pixel outline just inside rows [r0, r1) x columns [c0, c1)."""
     _fill_rect(image, r0, ti.min(r0 + t, r1), c0, c1, colour)
@@ -448,10 +455,8 @@ class DroneOverlay:
             for x in range(ex.num_drones):
                 c = ex.pos[env, x] * px_per_m
                 outer = diamond + 1.5
-                for py, px in ti.ndrange((ti.max(0, ti.floor(c[0] - outer, ti.i32)),
-                                          ti.min(image.shape[0], ti.ceil(c[0] + outer, ti.i32))),
-                                         (ti.max(0, ti.floor(c[1] - outer, ti.i32)),
-                                          ti.min(image.shape[1], ti.ceil(c[1] + outer, ti.i32)))):
+                b = _pixels_around(image, c, outer)
+                for py, px in ti.ndrange((b[0], b[1]), (b[2], b[3])):
                     d1 = ti.abs(py + 0.5 - c[0]) + ti.abs(px + 0.5 - c[1])  # L1 distance: a diamond
                     if d1 <= diamond:
                         image[py, px] = white
@@ -473,10 +478,8 @@ class DroneOverlay:
         for d in range(dr.num_drones):
             c = dr.pos[env, d] * px_per_m
             outer = radius + 1.0
-            for py, px in ti.ndrange((ti.max(0, ti.floor(c[0] - outer, ti.i32)),
-                                      ti.min(image.shape[0], ti.ceil(c[0] + outer, ti.i32))),
-                                     (ti.max(0, ti.floor(c[1] - outer, ti.i32)),
-                                      ti.min(image.shape[1], ti.ceil(c[1] + outer, ti.i32)))):
+            b = _pixels_around(image, c, outer)
+            for py, px in ti.ndrange((b[0], b[1]), (b[2], b[3])):
                 d2 = (py + 0.5 - c[0]) ** 2 + (px + 0.5 - c[1]) ** 2
                 if d2 <= radius * radius:
                     image[py, px] = self.palette[d]

@@ -11,7 +11,6 @@ from roshan.config import Config, DroneConfig, IgnitionConfig, MapConfig, Planne
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.planner import PlannerVectorEnv
 from roshan.kernels import annotate
-from roshan.kernels.fire import FireSim
 from roshan.kernels.render import (
     EXPLORER_COLOUR,
     EXTINGUISHED_ALPHA,
@@ -20,8 +19,8 @@ from roshan.kernels.render import (
     FrameRenderer,
     cell_colours,
 )
-from roshan.maps import BURNING, load_map
-from roshan.runtime import init_taichi
+from roshan.maps import BURNING
+from tests.conftest import sim_with_fires
 
 MODEL = str(Path(__file__).resolve().parents[2] / "models" / "fly_simple")
 CFG = Config(map=MapConfig(name="15x15_Woods"), ignition=IgnitionConfig(fire_percentage=0.05),
@@ -90,12 +89,7 @@ def test_fly_frame_legend_has_no_explorers_nor_unseen_fires():
 @pytest.fixture(scope="module")
 def sim():
     """1 env of 35x36_Woods, no random fires; cells (5, 5) and (5, 6) burning for 10 s."""
-    init_taichi("cpu")
-    s = FireSim(load_map("35x36_Woods"), ignition=IgnitionConfig(fire_percentage=0.0), num_envs=1, seed=1)
-    s.reset()
-    mask = np.zeros((1, s.rows, s.cols), np.int32)
-    mask[0, 5, 5:7] = 1
-    s.ignite_cells(mask.reshape(1, -1))
+    s = sim_with_fires("35x36_Woods", [(0, 5, slice(5, 7))])
     s.step(100)
     return s
 
@@ -122,12 +116,7 @@ def test_extinguished_cells_keep_a_blue_tint_after_the_flood(sim):
 
 
 def test_fires_not_on_the_detected_map_are_dimmed():
-    init_taichi("cpu")
-    s = FireSim(load_map("15x15_Woods"), ignition=IgnitionConfig(fire_percentage=0.0), num_envs=1, seed=1)
-    s.reset()
-    mask = np.zeros((1, s.rows, s.cols), np.int32)
-    mask[0, 3, 3:5] = 1
-    s.ignite_cells(mask.reshape(1, -1))
+    s = sim_with_fires("15x15_Woods", [(0, 3, slice(3, 5))])
     known = ti.field(ti.i8, (1, s.rows, s.cols))
     known[0, 3, 3] = 1  # only (3, 3) has been seen
     frame = FrameRenderer(s, cell_px=CELL_PX, particles=False, backend="raster", wind_arrow=False,

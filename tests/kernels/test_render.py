@@ -7,15 +7,15 @@ import pytest
 import taichi as ti
 from PIL import Image
 
-from roshan.config import IgnitionConfig
 from roshan.ggui import ggui_available
 from roshan.io import write_gif
 from roshan.kernels import particles as pt
 from roshan.kernels import render
-from roshan.kernels.fire import N_CONV, N_RAD, FireSim
+from roshan.kernels.fire import N_CONV, N_RAD
 from roshan.kernels.render import FrameRenderer, cell_colours, default_cell_px
-from roshan.maps import BURNED, BURNING, CLASSES, FLOODED, load_map
+from roshan.maps import BURNED, BURNING, CLASSES, FLOODED
 from roshan.runtime import init_taichi
+from tests.conftest import sim_with_fires
 
 RED = (255, 0, 0)
 CELL_PX = 10  # small frames keep the tests fast
@@ -30,15 +30,9 @@ GGUI_TOLERANCE = 1
 @pytest.fixture(scope="module")
 def sim():
     """2 envs of 35x36_Woods with no random fires: env 0 burns TOP_LEFT, env 1 burns CENTRE for 60 s."""
-    init_taichi("cpu")
-    s = FireSim(load_map("35x36_Woods"), ignition=IgnitionConfig(fire_percentage=0.0), num_envs=2, seed=1)
-    s.reset()
-    mask = np.zeros((2, s.rows, s.cols), np.int32)
-    mask[0][TOP_LEFT] = 1
-    mask[1][CENTRE] = 1
-    s.ignite_cells(mask.reshape(2, -1))
+    s = sim_with_fires("35x36_Woods", [(0, *TOP_LEFT), (1, *CENTRE)], num_envs=2)
     s.step(600)  # 60 s: every burning cell has emitted a convection particle, none has burned out
-    assert (s.state(0) == BURNING).sum() == mask[0].sum()
+    assert (s.state(0) == BURNING).sum() == 3 * 4  # every TOP_LEFT cell
     assert s.stats()["convection"][1] > 0
     return s
 
