@@ -11,7 +11,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -164,7 +163,7 @@ def write_report(spec: Spec, study, out_dir: str | Path) -> list[dict]:
         write_atomic(out / "report.md", markdown(spec, rows).encode())
         write_atomic(out / "per_seed.csv", per_seed_csv(spec, results).encode())
         summary = [_plain({k: v for k, v in r.items() if not k.startswith("_")}) for r in rows]
-        write_atomic(out / "summary.json", (json.dumps(summary, indent=2, default=_nan_free) + "\n").encode())
+        write_atomic(out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode())
         for key, r in results.items():
             path = out / "runs" / f"{key}.json"
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -172,8 +171,3 @@ def write_report(spec: Spec, study, out_dir: str | Path) -> list[dict]:
         plot(spec, rows, out / "success.png")
     return rows
 
-
-def _nan_free(x):
-    if isinstance(x, float) and math.isnan(x):
-        return None
-    return str(x)
