@@ -54,7 +54,8 @@ class FlyPolicy:
 
     def __init__(self, cfg: PPOConfig, collision: bool, frames: int = 3):
         self.cfg = cfg
-        self.net = ActorCritic(collision, frames, share_encoder=cfg.share_encoder, tanh_mean=not cfg.use_tanh_dist)
+        self.net = ActorCritic(collision, frames, share_encoder=cfg.share_encoder, tanh_mean=not cfg.use_tanh_dist,
+                               mean_bound=cfg.mean_bound if cfg.use_tanh_dist else 0.0)
         self.net.log_std.requires_grad_(cfg.log_std == "learned")
         self.shares_encoder = cfg.share_encoder
         self.dist_class = TanhNormal if cfg.use_tanh_dist else ClippedGaussian
