@@ -99,12 +99,10 @@ class ActorCritic(nn.Module):
     """Stochastic actor (mean head, gain 0.1, state-independent log_std) and value head (gain 1.0).
 
     With ``share_encoder`` the critic reads the actor's encoding; otherwise it owns a second encoder.
-    ``tanh_mean`` squashes the mean (the Gaussian + clip distribution); TanhNormal uses the raw mean, or with
-    ``mean_bound`` B > 0 the soft-bounded B tanh(mu / B) (see ``ppo.mean_bound``).
+    ``tanh_mean`` squashes the mean (the Gaussian + clip distribution); TanhNormal uses the raw mean.
     """
 
-    def __init__(self, collision: bool, frames: int = 3, share_encoder: bool = True, tanh_mean: bool = True,
-                 mean_bound: float = 0.0):
+    def __init__(self, collision: bool, frames: int = 3, share_encoder: bool = True, tanh_mean: bool = True):
         super().__init__()
         self.encoder = make_encoder(collision, frames)
         self.critic_encoder = None if share_encoder else make_encoder(collision, frames)
@@ -113,18 +111,11 @@ class ActorCritic(nn.Module):
         self.value = layer_init(nn.Linear(width, 1), gain=1.0)
         self.log_std = nn.Parameter(torch.zeros(2))
         self.tanh_mean = tanh_mean
-        self.mean_bound = mean_bound
-
-    def _mean(self, mu: torch.Tensor) -> torch.Tensor:
-        if self.tanh_mean:
-            return torch.tanh(mu)
-        if self.mean_bound > 0.0:
-            return self.mean_bound * torch.tanh(mu / self.mean_bound)
-        return mu
 
     def actor(self, obs: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
         """Mean (B, 2) and std (2,) of the action distribution."""
-        return self._mean(self.mu(self.encoder(obs))), self.log_std.exp()
+        mu = self.mu(self.encoder(obs))
+        return (torch.tanh(mu) if self.tanh_mean else mu), self.log_std.exp()
 
     def critic(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         enc = self.critic_encoder if self.critic_encoder is not None else self.encoder
@@ -143,7 +134,8 @@ class ActorCritic(nn.Module):
                                                                                 torch.Tensor]:
         """The heads on per-frame embeddings (..., T, 64), concatenated in frame order."""
         z = za.flatten(-2)
-        mean = self._mean(self.mu(z))
+        mu = self.mu(z)
+        mean = torch.tanh(mu) if self.tanh_mean else mu
         value = self.value(z if zc is None else zc.flatten(-2)).squeeze(-1)
         return mean, self.log_std.exp(), value
 

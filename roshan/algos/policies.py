@@ -16,6 +16,7 @@ from typing import NamedTuple
 
 import torch
 from torch import nn
+from torch.nn import functional as F
 
 from roshan.algos.distributions import ClippedGaussian, TanhNormal
 from roshan.algos.frames import FrameCache, gather_stacks
@@ -54,13 +55,15 @@ class FlyPolicy:
 
     def __init__(self, cfg: PPOConfig, collision: bool, frames: int = 3):
         self.cfg = cfg
-        self.net = ActorCritic(collision, frames, share_encoder=cfg.share_encoder, tanh_mean=not cfg.use_tanh_dist,
-                               mean_bound=cfg.mean_bound if cfg.use_tanh_dist else 0.0)
+        self.net = ActorCritic(collision, frames, share_encoder=cfg.share_encoder, tanh_mean=not cfg.use_tanh_dist)
         self.net.log_std.requires_grad_(cfg.log_std == "learned")
         self.shares_encoder = cfg.share_encoder
         self.dist_class = TanhNormal if cfg.use_tanh_dist else ClippedGaussian
         self.squashed_entropy = cfg.use_tanh_dist and cfg.tanh_entropy == "squashed"
         self._saturated: list[float] = []
+        self.bounds_mean = cfg.use_tanh_dist and cfg.mean_bound > 0.0
+        self._mean_excess: torch.Tensor | float = 0.0
+        self._excess_log: list[float] = []
         self.novelty_dim = frames * AGENT_FEATURES
 
     @staticmethod
@@ -124,8 +127,19 @@ class FlyPolicy:
         dist = self.dist_class(mean, std)
         if self.dist_class is TanhNormal:  # the share of pre-tanh means in tanh's flat tails, for the logs
             self._saturated.append(float((mean.detach().abs() > SATURATED).float().mean()))
+        if self.bounds_mean:
+            self._mean_excess = F.relu(mean.abs() - self.cfg.mean_bound).pow(2).sum(-1).mean()
+            self._excess_log.append(float(self._mean_excess.detach()))
         entropy = dist.squashed_entropy() if self.squashed_entropy else dist.entropy()
         return dist.log_prob_raw(stored), entropy, value
+
+    def penalty(self) -> torch.Tensor | float:
+        """The loss term of the last evaluation beside PPO's (0 unless ``ppo.mean_bound``): the mean squared
+        excess of the pre-tanh means over the bound, times ``ppo.mean_bound_coef``. Beyond |mu| ~ 2.2 every
+        sample is the same full-speed action, so the surrogate has no gradient there and nothing else stops a
+        mean that neighbouring states push outwards (the collision FlyAgent's drift, BENCHMARKS)."""
+        excess, self._mean_excess = self._mean_excess, 0.0
+        return self.cfg.mean_bound_coef * excess
 
     def before_update(self, updates: int) -> None:
         """The manual schedules of learning.md 4, applied before each update (k = finished updates); nothing
@@ -142,6 +156,9 @@ class FlyPolicy:
         if self._saturated:
             out["saturated"] = sum(self._saturated) / len(self._saturated)
             self._saturated.clear()
+        if self._excess_log:
+            out["mean_excess"] = sum(self._excess_log) / len(self._excess_log)
+            self._excess_log.clear()
         return out
 
 
@@ -186,6 +203,9 @@ class PlannerPolicy:
 
     def before_update(self, updates: int) -> None:
         pass
+
+    def penalty(self) -> float:
+        return 0.0
 
     def update_metrics(self) -> dict[str, float]:
         return {}

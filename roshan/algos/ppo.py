@@ -258,8 +258,10 @@ class PPO:
         """One gradient step; returns False (and takes no step) when the KL early stop triggers."""
         new_logp, entropy, value = evaluate()
         loss = minibatch_loss(self.cfg, new_logp, old_logp, entropy, value, normalized_advantages(adv), ret, stats)
+        penalty = self.policy.penalty()  # taken even when the KL stop skips the step, so none is left over
         if loss is None:
             return False
+        loss = loss + penalty
         for o in self.optimizers:
             o.zero_grad(set_to_none=True)
         loss.backward()

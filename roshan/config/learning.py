@@ -50,7 +50,7 @@ class OptimConfig(Section):
 
 # PPO keys that only the FlyAgent policy reads (its distribution, log-std schedule, encoders, minibatch shape).
 FLY_ONLY_PPO_KEYS = ("log_std", "decay_rate", "share_encoder", "use_tanh_dist", "tanh_entropy", "mean_bound",
-                     "separate_optimizers", "minibatch")
+                     "mean_bound_coef", "separate_optimizers", "minibatch")
 
 
 @dataclass(frozen=True)
@@ -80,8 +80,10 @@ class PPOConfig(Section):
     tanh_entropy: str = choice("base", ("base", "squashed"),
                                doc="TanhNormal's entropy bonus: base = of the pre-tanh Normal (the reference; blind "
                                    "to saturation, so the mean drifts into tanh's tails), squashed = of the actions")
-    mean_bound: float = num(0.0, 0.0, doc="TanhNormal: the pre-tanh mean is B tanh(mu / B), so samples can leave "
-                                          "tanh's flat tails and carry a gradient; 0 = unbounded (the reference)")
+    mean_bound: float = num(0.0, 0.0, doc="TanhNormal: penalise pre-tanh means beyond +-B (squared excess), so "
+                                          "samples keep leaving tanh's flat tails and carry a gradient; 0 = off "
+                                          "(the reference)")
+    mean_bound_coef: float = num(1.0, 0.0, doc="weight of the mean_bound penalty in the PPO loss")
     separate_optimizers: bool = False
     reward_eps: float = num(1e-8, 0.0, doc="added to the running variance (thesis-era 1e-8, newest 1e-4)")
     bootstrap_truncated: bool = True  # False: a timeout ends the trace like a terminal (the reference)
