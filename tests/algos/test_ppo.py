@@ -224,3 +224,44 @@ def test_rnd_adds_its_scaled_novelty_to_the_scaled_rewards_and_trains_its_predic
     clone = fly_ppo(cfg, collision=False, rnd=RNDConfig(enabled=True, coef=0.5, hidden=16, out=8))
     clone.load_state_dict(agent.state_dict())
     torch.testing.assert_close(clone.rnd.intrinsic_reward(features), agent.rnd.intrinsic_reward(features))
+
+
+@pytest.mark.parametrize("bound", [0.0, 3.0])
+def test_mean_bound_brings_a_saturated_mean_back_where_samples_differ(bound):
+    # Both pre-tanh means start at 8, deep in tanh's flat tail: every sample is the action ~ +1, the reward cannot
+    # tell samples apart and the surrogate has no gradient. Only the mean_bound penalty pulls the means back to
+    # where samples differ, and from there the bandit is learned.
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(1)
+    cfg = PPOConfig(lr=3e-3, horizon=8 * 128, batch_size=256, k_epochs=4, entropy_coeff=0.0, use_tanh_dist=True,
+                    mean_bound=bound)
+    agent = fly_ppo(cfg, collision=False)
+    with torch.no_grad():
+        agent.net.mu.bias.fill_(8.0)
+    for _ in range(40):
+        agent.update(bandit_rollout(agent, 8, 128, g), g)
+    with torch.no_grad():
+        targets = torch.rand(512, 2, generator=g) * 1.6 - 0.8
+        err = float((agent.act_deterministic(bandit_obs(512, targets)) - targets).pow(2).sum(-1).mean())
+    if bound:
+        assert err < 0.05
+    else:
+        assert err > 1.0  # still the action (1, 1) everywhere
+
+
+def test_mean_bound_penalty_is_the_squared_excess_once():
+    cfg = PPOConfig(use_tanh_dist=True, mean_bound=3.0, mean_bound_coef=2.0)
+    agent = fly_ppo(cfg, collision=False)
+    with torch.no_grad():
+        agent.net.mu.weight.zero_()
+        agent.net.mu.bias.copy_(torch.tensor([4.5, -1.0]))
+    obs = bandit_obs(6, torch.zeros(6, 2))
+    agent.policy.evaluate(obs, torch.zeros(6, 2))
+    penalty = agent.policy.penalty()
+    assert float(penalty.detach()) == pytest.approx(2.0 * 1.5**2)
+    penalty.backward()
+    assert agent.net.mu.bias.grad.tolist() == pytest.approx([2.0 * 2 * 1.5, 0.0])  # pulls only the first mean in
+    assert agent.policy.penalty() == 0.0  # taken once per evaluation
+    off = fly_ppo(PPOConfig(use_tanh_dist=False, mean_bound=3.0), collision=False)
+    off.policy.evaluate(obs, torch.zeros(6, 2))
+    assert off.policy.penalty() == 0.0  # the Gaussian's mean is tanh(mu) already
