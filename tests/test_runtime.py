@@ -1,4 +1,9 @@
-"""The Taichi field-tree guard: a clear error before Taichi's unchecked 512-tree limit, and reset_taichi."""
+"""The Taichi runtime: a clear error before Taichi's unchecked 512-tree limit, reset_taichi, and the arches refused."""
+
+import os
+import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -27,3 +32,28 @@ def test_reset_taichi_frees_every_field_tree():
     sim = FireSim(make_map(np.full((4, 4), 2)), num_envs=2)  # initialises Taichi again
     sim.reset()
     assert runtime.current_arch() == "cpu" and 1 <= runtime.field_trees() < before
+
+
+def simulate_summary(arch: str) -> tuple[str, str]:
+    """``roshan simulate`` of one seed on an arch with the refusal lifted: (Taichi's start line, summary)."""
+    cmd = [sys.executable, "-m", "roshan", "simulate", "--map", "35x36_Woods", "--envs", "4", "--steps", "200",
+           "--every", "100", "--seed", "1", "--arch", arch]
+    env = {**os.environ, runtime.UNVERIFIED_ENV: arch}
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600, check=True)
+    text = out.stdout + out.stderr
+    started = re.search(r"Starting on arch=(\w+)", text)
+    summary = re.search(r"\(([\d.]+) s of fire\).*?all envs: burning ([\d.]+)", text, re.S)
+    assert summary, text
+    return (started.group(1) if started else "?"), summary.groups()
+
+
+def test_vulkan_is_refused_because_its_fire_differs_from_the_cpu():
+    with pytest.raises(ValueError, match=r"--arch vulkan is refused: .*ROSHAN_UNVERIFIED_ARCH=vulkan"):
+        runtime.init_taichi("vulkan")
+    # The reason, kept true: the same seed on Vulkan (Mesa lavapipe, which CI installs) against the CPU.
+    cpu = simulate_summary("cpu")
+    assert cpu == ("x64", ("20.0", "18"))  # 200 updates of 0.1 s; 18 fires burning
+    vulkan = simulate_summary("vulkan")
+    if vulkan[0] != "vulkan":
+        pytest.skip("no Vulkan driver here (apt-get install mesa-vulkan-drivers)")
+    assert vulkan[1] != cpu[1], "Vulkan now matches the CPU on this seed: check 20 seeds and lift the refusal"
