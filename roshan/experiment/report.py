@@ -93,7 +93,7 @@ def per_seed_csv(spec: Spec, results: dict[str, dict]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["condition", "seed", "episodes", *[f"{m}_pct" for m in RATES], "tte_mean", "tte_median",
-                "updates", "env_steps", "train_minutes", "minutes", "host"])
+                "last_success_pct", "updates", "env_steps", "train_minutes", "minutes", "host"])
     for run in spec.runs():
         r = results.get(run.key)
         if r is None:
@@ -102,6 +102,7 @@ def per_seed_csv(spec: Spec, results: dict[str, dict]) -> str:
         train = r.get("train", {})
         w.writerow([run.condition.name, run.seed, r["episodes"], *[f"{rate(r, m):.2f}" for m in RATES],
                     f"{np.mean(tte):.1f}" if tte else "", f"{np.median(tte):.1f}" if tte else "",
+                    f"{100 * r['last']['success_rate']:.2f}" if "last" in r else "",
                     train.get("updates", ""), train.get("env_steps", ""),
                     f"{train['seconds'] / 60:.2f}" if "seconds" in train else "", f"{r.get('minutes', 0):.2f}",
                     r.get("host", "")])

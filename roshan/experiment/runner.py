@@ -40,7 +40,7 @@ from roshan.config import Config, dump_config
 from roshan.experiment.spec import Run, Spec, SpecError
 from roshan.io import prepare_output, write_atomic, writing
 from roshan.runs.envs import make_env
-from roshan.runs.evaluate import run_episodes, save_buffer, write_outputs
+from roshan.runs.evaluate import run_episodes, save_buffer, summarize, write_outputs
 from roshan.runs.provenance import code_version
 from roshan.runs.train import ensure_taichi_for, train
 from roshan.runtime import torch_device
@@ -237,6 +237,7 @@ def execute_run(run: Run, folder: Path, extra: tuple[str, ...] = (), progress_ba
             dump_config(cfg, folder / "config.yaml")
         trained = train(cfg, folder, resume=True, progress_bar=progress_bar, evaluate_at_end=False)
     episodes, reasons = evaluate(run, cfg, folder)
+    last = evaluate_last(run, cfg, folder, reasons) if cond.trains else None
     ev_dir = folder / "eval" / f"{cond.eval_seed}-{cond.eval_episodes}"
     provenance = {"experiment": str(folder.parent.parent.name), "run": run.key, "config": cond.config,
                   "overrides": [*cond.sets, *extra, f"sim.seed={run.seed}"], "code": code_version()}
@@ -252,18 +253,28 @@ def execute_run(run: Run, folder: Path, extra: tuple[str, ...] = (), progress_ba
         "minutes": round((time.time() - start) / 60.0, 3), "host": socket.gethostname(), "run_dir": str(folder),
         "code": provenance["code"],
     }
+    if last is not None:
+        result["last"] = last
     with writing("the run's result", folder / "result.json"):
         write_atomic(folder / "result.json", (json.dumps(result, indent=2) + "\n").encode())
     return result
 
 
-def evaluate(run: Run, cfg: Config, folder: Path) -> tuple[dict, tuple[str, ...]]:
-    """The condition's evaluation episodes (the same for every seed) with the run's best weights, or the
-    scripted controller; and the failures its records can hold."""
+def evaluate_last(run: Run, cfg: Config, folder: Path, reasons: tuple[str, ...]) -> dict:
+    """The same episodes with the run's last weights (is the last checkpoint as good as the best?): success and
+    failure rates and the TTE median."""
+    summary = summarize(evaluate(run, cfg, folder, "latest")[0], reasons=reasons, dt=cfg.fire.dt)
+    return {"success_rate": summary["success_rate"], "failure_rates": summary["failure_rates"],
+            "tte_median": summary["tte"]["median"]}
+
+
+def evaluate(run: Run, cfg: Config, folder: Path, weights: str = "best") -> tuple[dict, tuple[str, ...]]:
+    """The condition's evaluation episodes (the same for every seed) with the run's ``best`` (or ``latest``)
+    weights, or the scripted controller; and the failures its records can hold."""
     cond = run.condition
     E = max(1, min(cond.eval_envs or cfg.train.eval_envs, cond.eval_episodes))
     if cond.trains:
-        _, agent, _ = load_agent(folder, "best", torch_device())
+        _, agent, _ = load_agent(folder, weights, torch_device())
         env, act = make_env(cfg, E, cond.eval_seed, evaluation=True), policy_fn(agent)
     else:
         env = make_env(cfg, E, cond.eval_seed, evaluation=True, controller=cond.controller)

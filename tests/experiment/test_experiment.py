@@ -3,6 +3,7 @@ two workers sharing one storage never run the same (condition, seed) twice, and 
 match a hand computation. The runs here are fakes (a function that records what it was asked to run); one test
 trains and evaluates a real (tiny) run through the command line."""
 
+import csv
 import json
 import multiprocessing as mp
 import os
@@ -241,6 +242,9 @@ conditions:
     assert "simple/seed_0: success" in out.stdout
     result = json.loads((tmp_path / "runs" / "tiny" / "simple" / "seed_0" / "result.json").read_text())
     assert result["episodes"] == 2 and result["train"]["updates"] == 1
+    # One update: the last weights are the best, so the same episodes give the same result.
+    assert result["last"]["success_rate"] == result["success_rate"]
+    assert result["last"]["failure_rates"] == result["failure_rates"]
     rep = subprocess.run([*cmd, "report", str(spec), "--root", str(tmp_path / "runs")], env=env,
                          capture_output=True, text=True, timeout=300, cwd=REPO)
     assert rep.returncode == 0, rep.stderr[-3000:]
@@ -248,6 +252,8 @@ conditions:
     report = tmp_path / "runs" / "tiny" / "report"
     assert (report / "success.png").stat().st_size > 0
     assert (report / "runs" / "simple" / "seed_0.json").is_file()
+    rows = list(csv.DictReader((report / "per_seed.csv").open()))
+    assert rows[0]["last_success_pct"] == rows[0]["success_pct"]
     again = subprocess.run([*cmd, "run", str(spec), "--root", str(tmp_path / "runs")], env=env,
                            capture_output=True, text=True, timeout=300, cwd=REPO)
     assert again.returncode == 0 and "1/1 runs done, 0 waiting" in again.stdout  # nothing is run twice
