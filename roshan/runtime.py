@@ -22,7 +22,8 @@ _generation = [0]
 UNVERIFIED_ENV = "ROSHAN_UNVERIFIED_ARCH"
 WRONG_ARCHES = {
     "vulkan": "its fire kernels run silently wrong (Taichi 1.7.4's SPIR-V code on Mesa lavapipe: one launch of "
-              "1,000 fire updates makes a single update, and ignition lights 2 of the 18 fires the CPU lights)",
+              "1,000 fire updates makes a single update, and ignition lights 2 of the 18 fires the CPU lights; "
+              "benchmarks/scripts/vulkan_atomic_repro.py shows atomic adds in loops losing updates there)",
 }
 
 
