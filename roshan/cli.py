@@ -531,7 +531,8 @@ def bench_fidelity(seeds, conditions, every, json_path, plot_path, arch, threads
               help="Timed updates per run, from a reset (the original: mean over 50,000).")
 @click.option("--warmup", type=click.IntRange(min=0), default=100, show_default=True,
               help="Untimed updates (compiles).")
-@click.option("--big/--no-big", default=True, show_default=True, help="Also one env on Borkenberge and a 1M-cell map.")
+@click.option("--big/--no-big", default=True, show_default=True,
+              help="Also one env on Borkenberge and a 941k-cell map (Haard's size).")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None)
 @ARCH
 @THREADS
@@ -551,6 +552,38 @@ def bench_fire(env_counts, steps, warmup, big, json_path, arch, threads):
     report = b.fire_speed(counts, steps, warmup, big=big, arch=used, threads=threads,
                           on_row=lambda r: click.echo(b.format_fire_row(r), err=True))
     click.echo(b.format_fire_speed(report))
+    if json_path:
+        Path(json_path).write_text(json.dumps(report, indent=1))
+
+
+@bench.command("memory")
+@click.option("--steps", type=click.IntRange(min=1), default=50_000, show_default=True,
+              help="Updates of the 1.5 % fire from a reset; the 35 % rows run a tenth of them.")
+@click.option("--rss-envs", type=click.IntRange(min=0), default=64, show_default=True,
+              help="Envs of the 941k-cell map in a fresh process whose peak RSS is measured (0 = skip).")
+@click.option("--rss-steps", type=click.IntRange(min=1), default=500, show_default=True)
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None)
+@ARCH
+@THREADS
+def bench_memory(steps, rss_envs, rss_steps, json_path, arch, threads):
+    """Fire memory per env and reset cost, sparse (auto) against dense: 35x36_Woods, Borkenberge, 941k cells."""
+    from roshan.runtime import init_taichi
+    from roshan.tools import bench as b
+
+    used = init_taichi(arch or "cpu", threads)
+    rows = []
+    click.echo(b.FOOTPRINT_HEADER)
+    for land in (b.load_map("35x36_Woods"), b.load_map("Borkenberge"), b.tiled_map()):
+        for pct, n in ((0.015, steps), (0.35, max(1, steps // 10))):
+            for layout in ("auto", "dense"):
+                r = b.fire_footprint(land, pct, n, layout)
+                rows.append(r)
+                click.echo(b.format_footprint_row(r))
+    report = {"arch": used, "threads": threads, "runs": rows}
+    if rss_envs:
+        report["rss"] = rss = b.big_map_rss(rss_envs, rss_steps, used, threads)
+        click.echo(f"{rss_envs} envs of the 941k-cell map ({rss['layout']}), {rss_steps} updates: peak RSS "
+                   f"{rss['max_rss_bytes'] / 2**30:.2f} GiB, dropped blocks {rss['dropped_blocks']}")
     if json_path:
         Path(json_path).write_text(json.dumps(report, indent=1))
 

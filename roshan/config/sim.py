@@ -39,6 +39,12 @@ class FireConfig(Section):
     radiation: RadiationConfig = field(default_factory=RadiationConfig)
     conv_capacity: int = num(0, 0, doc="convection particles per env; 0 = auto from the map size")
     rad_capacity: int = num(0, 0, doc="radiation particles per env; 0 = auto from the map size")
+    layout: str = choice("auto", ("auto", "dense", "sparse"),
+                         doc="cell records: every cell (dense), or 8x8 blocks taken from a per-env pool when fire, "
+                             "particles or water first touch them (sparse); auto = sparse where the pool is "
+                             "under half the map")
+    block_capacity: int = num(0, 0, doc="8x8 blocks per env in the sparse layout; 0 = auto from the map size and "
+                                        "ignition.fire_percentage (a full pool is counted as dropped_blocks)")
 
 
 @dataclass(frozen=True)

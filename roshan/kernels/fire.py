@@ -5,6 +5,13 @@ and its particle pools) is done serially inside it. That keeps a step's cost pro
 map, makes the order of every update fixed (so a seed fixes the trajectory whatever the thread count) and costs
 one kernel launch per call however many envs or steps it advances.
 
+Cell records live in one of two layouts behind the same accessors (``_rec`` / ``_touch``): dense, a record per
+cell, or sparse, a per-env pool of 8 x 8 blocks that a block joins when fire, particles, water or the generator
+first write to one of its cells and leaves at the reset, so memory and reset cost follow the fire's footprint.
+The pool is plain fields (not Taichi ``pointer`` SNodes: those keep their memory when a field tree is destroyed,
+Taichi issue 5777, and do not exist on Vulkan), handed out in the fixed order of the env's serial updates, so
+a trajectory is the same in either layout. A full pool is counted (``dropped_blocks``), never silent.
+
 Cell timers are f64 sums of ``dt`` exactly as the reference accumulates them: with dt = 0.1 the sums run
 slightly below whole numbers, so most whole-second emissions and the burn-out of unrandomised cells happen one
 update after the integer count would say. Those events are synchronised across every cell lit at t = 0, so the
@@ -40,7 +47,7 @@ NEVER = -1.0  # tau_ign of cells that cannot ignite (the reference skips their e
 # A row is padded to 16 ints = one 64-byte cache line, so threads stepping neighbouring envs do not write
 # to the same line (false sharing halved two-thread throughput below ~1000 envs).
 (N_BURNING, N_EXPOSED, N_FLOODED, N_CONV, N_RAD, N_BURNED, N_DROP_CONV, N_DROP_RAD, N_EXTINGUISHED,
- N_IGNITED_INIT, N_IGNITION_SHORT, N_STEP, N_LIT) = range(13)
+ N_IGNITED_INIT, N_IGNITION_SHORT, N_STEP, N_LIT, N_BLOCKS, N_DROP_BLOCK) = range(15)
 N_COUNTS = 16
 STAT_NAMES = {
     "burning": N_BURNING,
@@ -52,15 +59,47 @@ STAT_NAMES = {
     "flooded": N_FLOODED,
     "extinguished": N_EXTINGUISHED,
     "initial_fires": N_IGNITED_INIT,
+    "blocks": N_BLOCKS,
+    "dropped_blocks": N_DROP_BLOCK,
 }
+BLOCK_SIDE = 8  # sparse layout: cells per block side
+BLOCK_SHIFT = 6  # log2(cells per block)
+BLOCK_CELLS = 1 << BLOCK_SHIFT
 
 
-def default_capacities(num_cells: int) -> tuple[int, int]:
+def default_capacities(num_cells: int, sparse_cells: int | None = None) -> tuple[int, int]:
     """Particle pool sizes per env: one convection and two radiation slots per cell, at least 1024 / 2048.
 
-    The reference peaks (shared/reference) stay below 0.4 convection and 0.8 radiation particles per cell.
+    The reference peaks (shared/reference) stay below 0.4 convection and 0.8 radiation particles per cell of a
+    map that burns whole. In the sparse layout the fire reaches at most ``sparse_cells`` cells (its block
+    pool), and a 1.5 % fire on a 941k-cell map used under 1 % of the dense pools, so the pools hold a quarter
+    and a half particle per pool cell there.
     """
+    if sparse_cells is not None:
+        return max(1024, sparse_cells // 4), max(2048, sparse_cells // 2)
     return max(1024, num_cells), max(2048, 2 * num_cells)
+
+
+def block_grid(rows: int, cols: int) -> tuple[int, int]:
+    """Blocks along the rows and the columns of a map (edge blocks are partly outside it)."""
+    return -(-rows // BLOCK_SIDE), -(-cols // BLOCK_SIDE)
+
+
+def default_block_capacity(num_blocks: int, fire_percentage: float) -> int:
+    """Blocks per env the sparse pool holds: 6 % of the map's blocks plus twice the ignited fraction, >= 64.
+
+    Measured (issue 17): over 100,000 updates a 1.5 % fire touched 2.8-5.4 % of the 8 x 8 blocks of a
+    941k-cell map, a 35 % fire 45-53 %.
+    """
+    return min(num_blocks, max(64, math.ceil(num_blocks * (0.06 + 2.0 * fire_percentage))))
+
+
+def choose_layout(layout: str, num_cells: int, block_capacity: int) -> str:
+    """``auto`` is sparse where the block pool holds under half the map's cells (elsewhere the indirection
+    costs more than it saves)."""
+    if layout != "auto":
+        return layout
+    return "sparse" if block_capacity * BLOCK_CELLS * 2 <= num_cells else "dense"
 
 
 def env_loop_padding(num_envs: int) -> int:
@@ -106,25 +145,27 @@ class FireSim:
         self.rows, self.cols = land.shape
         self.num_cells = self.rows * self.cols
         self.cell_size = float(land.cell_size)
-        auto_conv, auto_rad = default_capacities(self.num_cells)
-        self.conv_capacity = fire.conv_capacity or auto_conv
-        self.rad_capacity = fire.rad_capacity or auto_rad
+        self._choose_layout(fire, ignition)
         self._bake_constants()
         self.env_pad = env_loop_padding(num_envs)
 
-        E, N = num_envs, self.num_cells
+        E, N, R = num_envs, self.num_cells, self.record_capacity
         self.land = ti.field(ti.i32, N)
         self.land.from_numpy(np.ascontiguousarray(land.classes.reshape(-1), dtype=np.int32))
         self._alloc_class_table(land)
-        self.cells = ti.Vector.field(CELL_FIELDS, ti.i32, (E, N))
-        self.timers = ti.Vector.field(TIMER_FIELDS, ti.f64, (E, N))
-        self.burning = ti.field(ti.i32, (E, N))  # flat cell indices; also the generator's list of lit cells
-        self.exposed = ti.field(ti.i32, (E, N))  # also the generator's BFS queue
-        self.flooded = ti.field(ti.i32, (E, N))
-        self.mark = ti.field(ti.i32, (E, N))  # generator scratch: used / visited-by-cluster
+        # Cell records, (E, R): record r of env e is cell r (dense) or cell (r & 63) of its block slot r >> 6.
+        self.cells = ti.Vector.field(CELL_FIELDS, ti.i32, (E, R))
+        self.timers = ti.Vector.field(TIMER_FIELDS, ti.f64, (E, R))
+        self.mark = ti.field(ti.i32, (E, R))  # generator scratch: used / visited-by-cluster
         # 1 once the cell has burned this episode. The cell state cannot say it: an extinguished cell is FLOODED
         # (as is a flooded unburned one) and returns to its class when the flood drains. Counted in N_LIT.
-        self.lit = ti.field(ti.u8, (E, N))
+        self.lit = ti.field(ti.u8, (E, R))
+        if self.sparse:
+            self._alloc_block_pool(land)
+        L = self.list_capacity
+        self.burning = ti.field(ti.i32, (E, L))  # flat cell indices; also the generator's list of lit cells
+        self.exposed = ti.field(ti.i32, (E, L))  # also the generator's BFS queue
+        self.flooded = ti.field(ti.i32, (E, L))
         self.cand = ti.field(ti.i32, (E, 8))  # generator scratch: Moore neighbour candidates
         self.counts = ti.field(ti.i32, (E, N_COUNTS))
         self.conv = ti.Vector.field(pt.CONV_FIELDS, ti.f32, (E, self.conv_capacity))
@@ -143,6 +184,36 @@ class FireSim:
         self._all = np.ones(E, dtype=np.int32)
 
     # ------------------------------------------------------------------------------------------ setup
+
+    def _choose_layout(self, fire: FireConfig, ignition: IgnitionConfig) -> None:
+        """Layout, record and list capacities, and particle pool sizes (see the module docstring)."""
+        self.block_rows, self.block_cols = block_grid(self.rows, self.cols)
+        self.num_blocks = self.block_rows * self.block_cols
+        auto_blocks = default_block_capacity(self.num_blocks, ignition.fire_percentage)
+        self.block_capacity = min(self.num_blocks, fire.block_capacity or auto_blocks)
+        self.layout = choose_layout(fire.layout, self.num_cells, self.block_capacity)
+        self.sparse = self.layout == "sparse"
+        if self.sparse:
+            self.record_capacity = self.block_capacity * BLOCK_CELLS
+            self.list_capacity = min(self.num_cells, self.record_capacity)  # a listed cell has a record
+            auto_conv, auto_rad = default_capacities(self.num_cells, self.list_capacity)
+        else:
+            self.block_capacity = 0
+            self.record_capacity = self.list_capacity = self.num_cells
+            auto_conv, auto_rad = default_capacities(self.num_cells)
+        self.conv_capacity = fire.conv_capacity or auto_conv
+        self.rad_capacity = fire.rad_capacity or auto_rad
+
+    def _alloc_block_pool(self, land: LandCoverMap) -> None:
+        """The sparse layout's tables: each cell's block and place in it, and each env's block slots."""
+        i, j = np.divmod(np.arange(self.num_cells, dtype=np.int64), self.cols)
+        block = (i // BLOCK_SIDE) * self.block_cols + j // BLOCK_SIDE
+        place = (i % BLOCK_SIDE) * BLOCK_SIDE + j % BLOCK_SIDE
+        self.cell_block = ti.field(ti.i32, self.num_cells)  # block << 6 | place of every cell (shared by envs)
+        self.cell_block.from_numpy(((block << BLOCK_SHIFT) | place).astype(np.int32))
+        self.block_slot = ti.field(ti.i32, (self.num_envs, self.num_blocks))  # slot of a block, -1 = no record
+        self.block_slot.fill(-1)
+        self.slot_block = ti.field(ti.i32, (self.num_envs, self.block_capacity))  # block of each slot in use
 
     def _bake_constants(self) -> None:
         """Python scalars read inside kernels are compile-time constants: derive them once here."""
@@ -236,18 +307,26 @@ class FireSim:
 
     def state(self, env: int = 0) -> np.ndarray:
         """Cell states of one env as a (rows, cols) int32 array (class id, or 12/13/14 burning/burned/flooded)."""
-        return self.cells.to_numpy()[env, :, C_STATE].reshape(self.rows, self.cols)
+        return self.states()[env].reshape(self.rows, self.cols)
+
+    def states(self) -> np.ndarray:
+        """Cell states of every env, (E, rows*cols) int32 (a host copy: not for the step loop)."""
+        out = np.zeros((self.num_envs, self.num_cells), np.int32)
+        self._export_states(out)
+        return out
 
     def cell_records(self) -> tuple[np.ndarray, np.ndarray]:
         """Every cell record: ints (E, rows, cols, CELL_FIELDS) and f64 timers (E, rows, cols, TIMER_FIELDS).
 
-        Draws the durations of the cells the episode has not needed yet first (same values as drawing them
-        later). The flood timer is meaningful only while a cell is flooded.
+        A cell whose durations the episode has not needed yet shows them drawn (the same values as drawing
+        them later), in either layout and without storing them. The flood timer is meaningful only while a cell
+        is flooded.
         """
-        self._draw_all()
         shape = (self.num_envs, self.rows, self.cols)
-        return (self.cells.to_numpy().reshape(*shape, CELL_FIELDS),
-                self.timers.to_numpy().reshape(*shape, TIMER_FIELDS))
+        cells = np.zeros((self.num_envs, self.num_cells, CELL_FIELDS), np.int32)
+        timers = np.zeros((self.num_envs, self.num_cells, TIMER_FIELDS), np.float64)
+        self._export_records(cells, timers)
+        return cells.reshape(*shape, CELL_FIELDS), timers.reshape(*shape, TIMER_FIELDS)
 
     def particles(self, env: int = 0) -> tuple[np.ndarray, np.ndarray]:
         """Live particles of one env: convection (n, 3) and radiation (m, 3) rows of (x1 m, x2 m, intensity)."""
@@ -267,10 +346,12 @@ class FireSim:
         return self.wind.to_numpy()
 
     def memory_bytes_per_env(self) -> int:
-        """Bytes of Taichi field memory one env holds (cells, lists, particle pools)."""
-        per_cell = 4 * (CELL_FIELDS + 4) + 8 * TIMER_FIELDS + 1
-        return (self.num_cells * per_cell + 4 * (pt.CONV_FIELDS * self.conv_capacity
-                                                 + pt.RAD_FIELDS * self.rad_capacity) + 4 * (N_COUNTS + 8))
+        """Bytes of Taichi field memory one env holds (cell records, lists, block tables, particle pools)."""
+        per_record = 4 * (CELL_FIELDS + 1) + 8 * TIMER_FIELDS + 1
+        tables = 4 * (self.num_blocks + self.block_capacity) if self.sparse else 0
+        return (self.record_capacity * per_record + 3 * 4 * self.list_capacity + tables
+                + 4 * (pt.CONV_FIELDS * self.conv_capacity + pt.RAD_FIELDS * self.rad_capacity)
+                + 4 * (N_COUNTS + 8))
 
     # Test hooks: drive the cell state machine directly, without particles or the generator.
     def ignite_cells(self, mask) -> None:
@@ -300,12 +381,17 @@ class FireSim:
 
     @ti.kernel
     def _reset_envs(self, mask: ti.types.ndarray(dtype=ti.i32, ndim=1), seed_key: ti.u32):
+        if ti.static(self.sparse):
+            for e, k in ti.ndrange(self.num_envs, self.block_capacity):  # hand back the blocks the episode used
+                if mask[e] != 0 and k < self.counts[e, N_BLOCKS]:
+                    self.block_slot[e, self.slot_block[e, k]] = -1
         for e in range(self.num_envs):  # new episode: new key, counters, wind
             if mask[e] != 0:
                 self.begin_episode(e, seed_key)
-        for e, c in ti.ndrange(self.num_envs, self.num_cells):  # every cell of the reset envs, in parallel
-            if mask[e] != 0:
-                self._reset_cell(e, c)
+        if ti.static(not self.sparse):
+            for e, c in ti.ndrange(self.num_envs, self.num_cells):  # every cell of the reset envs, in parallel
+                if mask[e] != 0:
+                    self._reset_record(e, c, self.land[c])
         for v in range(self.num_envs * self.env_pad):  # the generator is serial per env
             e = v // self.env_pad
             if v % self.env_pad == 0 and mask[e] != 0:
@@ -314,9 +400,13 @@ class FireSim:
     @ti.func
     def reset_env(self, e, seed_key: ti.u32):
         """A whole reset of one env, serially: for same-step autoreset inside a batched step kernel."""
+        if ti.static(self.sparse):
+            for k in range(self.counts[e, N_BLOCKS]):
+                self.block_slot[e, self.slot_block[e, k]] = -1
         self.begin_episode(e, seed_key)
-        for c in range(self.num_cells):
-            self._reset_cell(e, c)
+        if ti.static(not self.sparse):
+            for c in range(self.num_cells):
+                self._reset_record(e, c, self.land[c])
         self.light_fires(e)
 
     @ti.func
@@ -344,26 +434,57 @@ class FireSim:
         return self._drop_water(e, c)
 
     # Read access for the kernels of other modules (drones, tasks, episodes, rendering, the initial-fire
-    # generator): they ask by name, so the record layouts (C_*, N_*) stay this module's business.
+    # generator): they ask by name, so the record layouts (C_*, N_*, dense or sparse) stay this module's business.
 
     @ti.func
     def is_burning(self, e, c) -> ti.i32:
-        return ti.cast(self.cells[e, c][C_STATE] == BURNING, ti.i32)
+        return ti.cast(self.cell_state(e, c) == BURNING, ti.i32)
 
     @ti.func
     def cell_state(self, e, c) -> ti.i32:
         """Cell c's class id, or BURNING / BURNED / FLOODED."""
-        return self.cells[e, c][C_STATE]
+        state = 0
+        if ti.static(self.sparse):
+            r = self._rec(e, c)
+            state = self.land[c]
+            if r >= 0:
+                state = self.cells[e, r][C_STATE]
+        else:
+            state = self.cells[e, c][C_STATE]
+        return state
 
     @ti.func
     def was_extinguished(self, e, c) -> ti.i32:
         """1 if water put cell c out while it was burning, earlier in this episode."""
-        return ti.cast((self.cells[e, c][C_FLAGS] & FLAG_EXTINGUISHED) != 0, ti.i32)
+        r = self._rec(e, c)
+        out = 0
+        if r >= 0:
+            out = ti.cast((self.cells[e, r][C_FLAGS] & FLAG_EXTINGUISHED) != 0, ti.i32)
+        return out
 
     @ti.func
     def can_ignite(self, e, c) -> ti.i32:
         """1 if cell c's current state can catch fire."""
-        return self.cls_ignitable[self.cells[e, c][C_STATE]]
+        return self.cls_ignitable[self.cell_state(e, c)]
+
+    @ti.func
+    def mark_of(self, e, c) -> ti.i32:
+        """The generator's scratch mark of cell c (0 since the reset)."""
+        r = self._rec(e, c)
+        m = 0
+        if r >= 0:
+            m = self.mark[e, r]
+        return m
+
+    @ti.func
+    def set_mark(self, e, c, m) -> ti.i32:
+        """Set the generator's mark of cell c; 0 if the sparse pool had no room for it (counted)."""
+        r = self._touch(e, c)
+        ok = 0
+        if r >= 0:
+            self.mark[e, r] = m
+            ok = 1
+        return ok
 
     @ti.func
     def burning_count(self, e) -> ti.i32:
@@ -406,7 +527,9 @@ class FireSim:
     @ti.func
     def ignite(self, e, c):
         """Light cell c (the initial-fire generator; callers check can_ignite first)."""
-        self._ignite(e, c)
+        r = self._touch(e, c)
+        if r >= 0:
+            self._ignite(e, r, c)
 
     @ti.func
     def report_ignition_short(self, e, missing):
@@ -420,49 +543,134 @@ class FireSim:
             alpha = rng.TWO_PI * rng.uniform(rng.key(self.env_key[e], rng.DOMAIN_EPISODE, 0))
         return ti.Vector([ti.cos(alpha), ti.sin(alpha)]) * self.wind_speed
 
+    # ------------------------------------------------------------------------------------------ cell records
+
     @ti.func
-    def _reset_cell(self, e, c):
+    def _rec(self, e, c) -> ti.i32:
+        """Record index of cell c in env e; -1 where the sparse layout holds none (the cell is as reset)."""
+        r = c
+        if ti.static(self.sparse):
+            place = self.cell_block[c]
+            slot = self.block_slot[e, place >> BLOCK_SHIFT]
+            r = -1
+            if slot >= 0:
+                r = (slot << BLOCK_SHIFT) | (place & (BLOCK_CELLS - 1))
+        return r
+
+    @ti.func
+    def _touch(self, e, c) -> ti.i32:
+        """Record index of cell c for writing. The sparse layout first gives the cell's block the env's next free
+        slot (reset records for its cells); -1 if the env's pool is full, counted in N_DROP_BLOCK."""
+        r = c
+        if ti.static(self.sparse):
+            place = self.cell_block[c]
+            b = place >> BLOCK_SHIFT
+            slot = self.block_slot[e, b]
+            if slot < 0:
+                n = self.counts[e, N_BLOCKS]
+                if n < self.block_capacity:
+                    slot = n
+                    self.counts[e, N_BLOCKS] = n + 1
+                    self.block_slot[e, b] = slot
+                    self.slot_block[e, slot] = b
+                    self._reset_block(e, b, slot)
+                else:
+                    self.counts[e, N_DROP_BLOCK] += 1
+            r = -1
+            if slot >= 0:
+                r = (slot << BLOCK_SHIFT) | (place & (BLOCK_CELLS - 1))
+        return r
+
+    @ti.func
+    def _reset_block(self, e, b, slot):
+        i0 = (b // self.block_cols) * BLOCK_SIDE
+        j0 = (b % self.block_cols) * BLOCK_SIDE
+        for k in range(BLOCK_CELLS):
+            i = i0 + k // BLOCK_SIDE
+            j = j0 + k % BLOCK_SIDE
+            cls = 0  # the part of an edge block outside the map is never read
+            if i < self.rows and j < self.cols:
+                cls = self.land[i * self.cols + j]
+            self._reset_record(e, (slot << BLOCK_SHIFT) | k, cls)
+
+    @ti.func
+    def _reset_record(self, e, r, cls):
         """A new episode's cell: its class, no flags. Its durations are drawn when first needed.
 
         Most cells of an episode are never exposed nor lit, and a reset that drew all of them spent most of a
         random-action env step (ten hashes and two f64 divisions per cell). The draws are counter-based
         (keyed by episode and cell), so drawing later gives exactly the same values.
         """
-        self.cells[e, c] = ti.Vector([self.land[c], 0, -1, 0], ti.i32)
-        self.mark[e, c] = 0
-        self.lit[e, c] = ti.u8(0)
+        self.cells[e, r] = ti.Vector([cls, 0, -1, 0], ti.i32)
+        self.mark[e, r] = 0
+        self.lit[e, r] = ti.u8(0)
 
     @ti.func
-    def _draw_durations(self, e, c):
-        """Per-cell randomisation of firespin.md 2.3: durations x (1 + s*u), s in {-1,0,1}, u ~ U(0.1, 0.2).
+    def _durations(self, e, c):
+        """(tau_ign, tau_burn) of cell c this episode, firespin.md 2.3: durations x (1 + s*u), s in {-1, 0, 1},
+        u ~ U(0.1, 0.2); tau_ign is NEVER for a class that cannot ignite."""
+        cls = self.land[c]
+        k = rng.key(self.env_key[e], rng.DOMAIN_CELLS, c)
+        s1 = ti.cast(rng.uniform_int(rng.key(k, 0, 0), 3) - 1, ti.f64)
+        u1 = 0.1 + 0.1 * ti.cast(rng.uniform(rng.key(k, 1, 0)), ti.f64)
+        s2 = ti.cast(rng.uniform_int(rng.key(k, 2, 0), 3) - 1, ti.f64)
+        u2 = 0.1 + 0.1 * ti.cast(rng.uniform(rng.key(k, 3, 0)), ti.f64)
+        tau_burn = ti.cast(self.cls_tau_burn[cls], ti.f64) * (1.0 + s1 * u1)
+        tau_ign = ti.f64(NEVER)
+        if self.cls_ignitable[cls] != 0:
+            tau_ign = ti.cast(self.cls_tau_ign[cls], ti.f64) * (1.0 + s2 * u2)
+        return ti.Vector([tau_ign, tau_burn], ti.f64)
 
-        Once per episode, before the cell is first exposed or lit; also clears its exposure and burn timers.
-        The flood timer is set by every flood and read only while the cell is flooded.
-        """
-        flags = self.cells[e, c][C_FLAGS]
+    @ti.func
+    def _periods(self, c, tau_burn: ti.f64) -> ti.i32:
+        """Convection (low 16 bits) and radiation emission periods of cell c."""
+        cls = self.land[c]
+        return _period(tau_burn, self.cls_n_conv[cls]) | (_period(tau_burn, self.cls_n_rad[cls]) << 16)
+
+    @ti.func
+    def _draw_durations(self, e, r, c):
+        """Once per episode, before cell c (record r) is first exposed or lit: its durations and periods; also
+        clears its exposure and burn timers. The flood timer is set by every flood and read only while the
+        cell is flooded."""
+        flags = self.cells[e, r][C_FLAGS]
         if (flags & FLAG_DRAWN) == 0:
-            cls = self.land[c]
-            k = rng.key(self.env_key[e], rng.DOMAIN_CELLS, c)
-            s1 = ti.cast(rng.uniform_int(rng.key(k, 0, 0), 3) - 1, ti.f64)
-            u1 = 0.1 + 0.1 * ti.cast(rng.uniform(rng.key(k, 1, 0)), ti.f64)
-            s2 = ti.cast(rng.uniform_int(rng.key(k, 2, 0), 3) - 1, ti.f64)
-            u2 = 0.1 + 0.1 * ti.cast(rng.uniform(rng.key(k, 3, 0)), ti.f64)
-            tau_burn = ti.cast(self.cls_tau_burn[cls], ti.f64) * (1.0 + s1 * u1)
-            tau_ign = ti.f64(NEVER)
-            if self.cls_ignitable[cls] != 0:
-                tau_ign = ti.cast(self.cls_tau_ign[cls], ti.f64) * (1.0 + s2 * u2)
-            self.cells[e, c][C_PERIODS] = (_period(tau_burn, self.cls_n_conv[cls])
-                                           | (_period(tau_burn, self.cls_n_rad[cls]) << 16))
-            self.cells[e, c][C_FLAGS] = flags | FLAG_DRAWN
-            self.timers[e, c][T_IGN] = tau_ign
-            self.timers[e, c][T_BURN_LEFT] = tau_burn
-            self.timers[e, c][T_BURN_TIME] = 0.0
-            self.timers[e, c][T_EXPOSURE] = 0.0
+            d = self._durations(e, c)
+            self.cells[e, r][C_PERIODS] = self._periods(c, d[1])
+            self.cells[e, r][C_FLAGS] = flags | FLAG_DRAWN
+            self.timers[e, r][T_IGN] = d[0]
+            self.timers[e, r][T_BURN_LEFT] = d[1]
+            self.timers[e, r][T_BURN_TIME] = 0.0
+            self.timers[e, r][T_EXPOSURE] = 0.0
 
     @ti.kernel
-    def _draw_all(self):
+    def _export_states(self, out: ti.types.ndarray(dtype=ti.i32, ndim=2)):
         for e, c in ti.ndrange(self.num_envs, self.num_cells):
-            self._draw_durations(e, c)
+            out[e, c] = self.cell_state(e, c)
+
+    @ti.kernel
+    def _export_records(self, cells: ti.types.ndarray(dtype=ti.i32, ndim=3),
+                        timers: ti.types.ndarray(dtype=ti.f64, ndim=3)):
+        for e, c in ti.ndrange(self.num_envs, self.num_cells):
+            rec = ti.Vector([self.land[c], 0, -1, 0], ti.i32)
+            tim = ti.Vector([0.0, 0.0, 0.0, 0.0, 0.0], ti.f64)
+            r = self._rec(e, c)
+            if r >= 0:
+                rec = self.cells[e, r]
+                tim = self.timers[e, r]
+            if (rec[C_FLAGS] & FLAG_DRAWN) == 0:  # what _draw_durations will store, without storing it
+                d = self._durations(e, c)
+                rec[C_PERIODS] = self._periods(c, d[1])
+                rec[C_FLAGS] |= FLAG_DRAWN
+                tim[T_IGN] = d[0]
+                tim[T_BURN_LEFT] = d[1]
+                tim[T_BURN_TIME] = 0.0
+                tim[T_EXPOSURE] = 0.0
+            for k in ti.static(range(CELL_FIELDS)):
+                cells[e, c, k] = rec[k]
+            for k in ti.static(range(TIMER_FIELDS)):
+                timers[e, c, k] = tim[k]
+
+    # ------------------------------------------------------------------------------------------ one update
 
     @ti.kernel
     def _advance(self, n_steps: ti.i32):
@@ -497,14 +705,16 @@ class FireSim:
     @ti.func
     def _visit(self, e, c, t):
         """A live particle sits in cell c during update t: stamp it and add it to the exposed list once."""
-        self.cells[e, c][C_VISIT] = t
-        flags = self.cells[e, c][C_FLAGS]
-        if self.cls_ignitable[self.cells[e, c][C_STATE]] != 0 and (flags & FLAG_EXPOSED) == 0:
-            self._draw_durations(e, c)
-            self.cells[e, c][C_FLAGS] |= FLAG_EXPOSED
-            n = self.counts[e, N_EXPOSED]
-            self.exposed[e, n] = c
-            self.counts[e, N_EXPOSED] = n + 1
+        r = self._touch(e, c)
+        if r >= 0:
+            self.cells[e, r][C_VISIT] = t
+            flags = self.cells[e, r][C_FLAGS]
+            if self.cls_ignitable[self.cells[e, r][C_STATE]] != 0 and (flags & FLAG_EXPOSED) == 0:
+                self._draw_durations(e, r, c)
+                self.cells[e, r][C_FLAGS] |= FLAG_EXPOSED
+                n = self.counts[e, N_EXPOSED]
+                self.exposed[e, n] = c
+                self.counts[e, N_EXPOSED] = n + 1
 
     @ti.func
     def _move_convection(self, e, t, step_key):
@@ -544,15 +754,16 @@ class FireSim:
         w = 0
         for k in range(self.counts[e, N_FLOODED]):
             c = self.flooded[e, k]
-            f = self.timers[e, c][T_FLOOD] + ti.f64(self.dt)
+            r = self._rec(e, c)  # a listed cell has a record
+            f = self.timers[e, r][T_FLOOD] + ti.f64(self.dt)
             if f >= self.flood_duration:  # the flood ends: back to the original class, or burned
-                self.timers[e, c][T_FLOOD] = self.flood_duration
+                self.timers[e, r][T_FLOOD] = self.flood_duration
                 state = self.land[c]
-                if (self.cells[e, c][C_FLAGS] & FLAG_BURNED_DOWN) != 0:
+                if (self.cells[e, r][C_FLAGS] & FLAG_BURNED_DOWN) != 0:
                     state = BURNED
-                self.cells[e, c][C_STATE] = state
+                self.cells[e, r][C_STATE] = state
             else:
-                self.timers[e, c][T_FLOOD] = f
+                self.timers[e, r][T_FLOOD] = f
                 self.flooded[e, w] = c
                 w += 1
         self.counts[e, N_FLOODED] = w
@@ -563,26 +774,27 @@ class FireSim:
         w = 0
         for k in range(self.counts[e, N_EXPOSED]):
             c = self.exposed[e, k]
-            flags = self.cells[e, c][C_FLAGS]
-            if self.cells[e, c][C_VISIT] != t:
-                self.cells[e, c][C_FLAGS] = flags & ~FLAG_EXPOSED
+            r = self._rec(e, c)
+            flags = self.cells[e, r][C_FLAGS]
+            if self.cells[e, r][C_VISIT] != t:
+                self.cells[e, r][C_FLAGS] = flags & ~FLAG_EXPOSED
             else:
-                exposure = self.timers[e, c][T_EXPOSURE] + ti.f64(self.dt)
-                self.timers[e, c][T_EXPOSURE] = exposure
-                if exposure >= self.timers[e, c][T_IGN]:
-                    self.cells[e, c][C_FLAGS] = flags & ~FLAG_EXPOSED
-                    self._ignite(e, c)
+                exposure = self.timers[e, r][T_EXPOSURE] + ti.f64(self.dt)
+                self.timers[e, r][T_EXPOSURE] = exposure
+                if exposure >= self.timers[e, r][T_IGN]:
+                    self.cells[e, r][C_FLAGS] = flags & ~FLAG_EXPOSED
+                    self._ignite(e, r, c)
                 else:
                     self.exposed[e, w] = c
                     w += 1
         self.counts[e, N_EXPOSED] = w
 
     @ti.func
-    def _ignite(self, e, c):
-        self._draw_durations(e, c)
-        self.cells[e, c][C_STATE] = BURNING
-        if self.lit[e, c] == 0:
-            self.lit[e, c] = ti.u8(1)
+    def _ignite(self, e, r, c):
+        self._draw_durations(e, r, c)
+        self.cells[e, r][C_STATE] = BURNING
+        if self.lit[e, r] == 0:
+            self.lit[e, r] = ti.u8(1)
             self.counts[e, N_LIT] += 1
         n = self.counts[e, N_BURNING]
         self.burning[e, n] = c
@@ -593,17 +805,18 @@ class FireSim:
         w = 0
         for k in range(self.counts[e, N_BURNING]):
             c = self.burning[e, k]
-            timer = self.timers[e, c]
+            r = self._rec(e, c)
+            timer = self.timers[e, r]
             before = timer[T_BURN_TIME]
             after = before + ti.f64(self.dt)
             left = timer[T_BURN_LEFT] - ti.f64(self.dt)
-            self.timers[e, c][T_BURN_TIME] = after
-            self.timers[e, c][T_BURN_LEFT] = left
+            self.timers[e, r][T_BURN_TIME] = after
+            self.timers[e, r][T_BURN_LEFT] = left
             # Emit when the burning time crosses a whole second k >= 1 that is a multiple of the period.
             sec_old = ti.cast(before, ti.i32)
             sec_new = ti.cast(ti.floor(after), ti.i32)
             if sec_new != sec_old:
-                periods = self.cells[e, c][C_PERIODS]
+                periods = self.cells[e, r][C_PERIODS]
                 if ti.static(self.conv_on):
                     if sec_new % (periods & 0xFFFF) == 0:
                         self._emit_convection(e, c, step_key)
@@ -611,8 +824,8 @@ class FireSim:
                     if sec_new % (periods >> 16) == 0:
                         self._emit_radiation(e, c, step_key)
             if left <= 0.0:
-                self.cells[e, c][C_STATE] = BURNED
-                self.cells[e, c][C_FLAGS] |= FLAG_BURNED_DOWN
+                self.cells[e, r][C_STATE] = BURNED
+                self.cells[e, r][C_FLAGS] |= FLAG_BURNED_DOWN
                 self.counts[e, N_BURNED] += 1
             else:
                 self.burning[e, w] = c
@@ -671,25 +884,28 @@ class FireSim:
 
     @ti.func
     def _drop_water(self, e, c) -> ti.i32:
-        """firespin.md 8: flood a cell; returns 1 if it was burning (extinguished)."""
-        state = self.cells[e, c][C_STATE]
+        """firespin.md 8: flood a cell; returns 1 if it was burning (extinguished). A drop the sparse pool has
+        no room for is counted in N_DROP_BLOCK and changes nothing."""
+        r = self._touch(e, c)
         was_burning = 0
-        if state == BURNING:
-            was_burning = 1
-            _remove_from_list(self.burning, self.counts, e, N_BURNING, c)
-            self.timers[e, c][T_EXPOSURE] = 0.0
-            self.counts[e, N_EXTINGUISHED] += 1
-            self.cells[e, c][C_FLAGS] |= FLAG_EXTINGUISHED
-        elif (self.cells[e, c][C_FLAGS] & FLAG_EXPOSED) != 0:
-            _remove_from_list(self.exposed, self.counts, e, N_EXPOSED, c)
-            self.cells[e, c][C_FLAGS] = self.cells[e, c][C_FLAGS] & ~FLAG_EXPOSED
-        if state != FLOODED:
-            n = self.counts[e, N_FLOODED]
-            self.flooded[e, n] = c
-            self.counts[e, N_FLOODED] = n + 1
-        self.cells[e, c][C_STATE] = FLOODED
-        self.timers[e, c][T_FLOOD] = 0.0
-        self._delete_particles_in(e, c)
+        if r >= 0:
+            state = self.cells[e, r][C_STATE]
+            if state == BURNING:
+                was_burning = 1
+                _remove_from_list(self.burning, self.counts, e, N_BURNING, c)
+                self.timers[e, r][T_EXPOSURE] = 0.0
+                self.counts[e, N_EXTINGUISHED] += 1
+                self.cells[e, r][C_FLAGS] |= FLAG_EXTINGUISHED
+            elif (self.cells[e, r][C_FLAGS] & FLAG_EXPOSED) != 0:
+                _remove_from_list(self.exposed, self.counts, e, N_EXPOSED, c)
+                self.cells[e, r][C_FLAGS] = self.cells[e, r][C_FLAGS] & ~FLAG_EXPOSED
+            if state != FLOODED:
+                n = self.counts[e, N_FLOODED]
+                self.flooded[e, n] = c
+                self.counts[e, N_FLOODED] = n + 1
+            self.cells[e, r][C_STATE] = FLOODED
+            self.timers[e, r][T_FLOOD] = 0.0
+            self._delete_particles_in(e, c)
         return was_burning
 
     @ti.func
@@ -716,11 +932,13 @@ class FireSim:
     def _ignite_cells(self, mask: ti.types.ndarray(dtype=ti.i32, ndim=2)):
         for e in range(self.num_envs):
             for c in range(self.num_cells):
-                if mask[e, c] != 0 and self.cls_ignitable[self.cells[e, c][C_STATE]] != 0:
-                    if (self.cells[e, c][C_FLAGS] & FLAG_EXPOSED) != 0:
-                        _remove_from_list(self.exposed, self.counts, e, N_EXPOSED, c)
-                        self.cells[e, c][C_FLAGS] = self.cells[e, c][C_FLAGS] & ~FLAG_EXPOSED
-                    self._ignite(e, c)
+                if mask[e, c] != 0 and self.can_ignite(e, c) != 0:
+                    r = self._touch(e, c)
+                    if r >= 0:
+                        if (self.cells[e, r][C_FLAGS] & FLAG_EXPOSED) != 0:
+                            _remove_from_list(self.exposed, self.counts, e, N_EXPOSED, c)
+                            self.cells[e, r][C_FLAGS] = self.cells[e, r][C_FLAGS] & ~FLAG_EXPOSED
+                        self._ignite(e, r, c)
 
     @ti.kernel
     def _prescribe_exposure(self, mask: ti.types.ndarray(dtype=ti.i32, ndim=2)):

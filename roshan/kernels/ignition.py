@@ -6,7 +6,8 @@ percentage is a maximum (each cluster is a self-avoiding random walk that stops 
 
 Runs serially inside one env of the reset kernel, drawing from that env's counter-based stream, so the
 layout depends only on (seed, env, episode). Functions take the simulator as ``ti.template()`` and use its
-fields: ``exposed`` serves as the BFS queue, ``mark`` as the used / visited flags, ``cand`` for neighbours.
+fields: ``exposed`` serves as the BFS queue (``list_capacity`` long), ``cand`` for neighbours, and each cell's
+generator mark (``mark_of`` / ``set_mark``) holds the used / visited flags.
 """
 
 
@@ -60,7 +61,7 @@ def _random_cell(sim: ti.template(), e) -> ti.i32:
 @ti.func
 def _fresh(sim: ti.template(), e, c, tag) -> ti.i32:
     """Not visited by this cluster, not used by any, and ignitable: a candidate to grow into."""
-    m = sim.mark[e, c]
+    m = sim.mark_of(e, c)
     return ti.cast((m & USED) == 0 and (m >> 1) != tag and sim.can_ignite(e, c) != 0, ti.i32)
 
 
@@ -79,7 +80,7 @@ def _light_clusters(sim: ti.template(), e):
         start = -1
         for _ in range(MAX_START_TRIES):
             cell = _random_cell(sim, e)
-            if (sim.mark[e, cell] & USED) == 0 and sim.can_ignite(e, cell) != 0:
+            if (sim.mark_of(e, cell) & USED) == 0 and sim.can_ignite(e, cell) != 0:
                 start = cell
                 break
         if start >= 0:
@@ -88,9 +89,13 @@ def _light_clusters(sim: ti.template(), e):
 
 @ti.func
 def _push(sim: ti.template(), e, tail, c, tag, used):
-    sim.exposed[e, tail] = c
-    sim.mark[e, c] = (sim.mark[e, c] & USED) | used | (tag << 1)
-    return tail + 1
+    """Queue c, marked visited by this cluster (and used); not if the queue or the sparse pool is full."""
+    n = tail
+    if n < sim.list_capacity:
+        if sim.set_mark(e, c, (sim.mark_of(e, c) & USED) | used | (tag << 1)) != 0:
+            sim.exposed[e, n] = c
+            n += 1
+    return n
 
 
 @ti.func
@@ -133,7 +138,7 @@ def _grow_cluster(sim: ti.template(), e, start, size, tag):
         if sim.can_ignite(e, cell) != 0:
             sim.ignite(e, cell)
             ignited += 1
-        sim.mark[e, cell] |= USED
+        sim.set_mark(e, cell, sim.mark_of(e, cell) | USED)
         n = _gather_neighbours(sim, e, cell, tag, 1)
         if head == tail and ignited < size and n > 0:
             # Keep a one-cell tendril growing: a random fresh neighbour (= shuffle, take the first).
@@ -233,7 +238,7 @@ def _light_ring(sim: ti.template(), e, n_fires):
             d = ti.sqrt(ti.cast(di * di + dj * dj, ti.f32))
             if 0 <= i < sim.rows and 0 <= j < sim.cols and r_in <= d <= r_out:
                 c = i * sim.cols + j
-                if sim.can_ignite(e, c) != 0:
+                if sim.can_ignite(e, c) != 0 and n < sim.list_capacity:
                     sim.exposed[e, n] = c
                     n += 1
     lit = 0

@@ -14,6 +14,7 @@ from roshan.algos.networks import flatten_drones
 from roshan.config import (
     Config,
     DroneConfig,
+    FireConfig,
     FlyConfig,
     IgnitionConfig,
     MapConfig,
@@ -153,20 +154,24 @@ ORIGINAL_STEPS_PER_S = {
     ("35x36_Woods", 0.35): 50_000,
     ("81x129_Campsite", 0.015): 40_000,
     ("Borkenberge", 0.015): 1_500,
-    ("Borkenberge_1M", 0.015): 500,  # the original's figure for Haard (941k cells)
+    ("Borkenberge_940k", 0.015): 500,  # the original's figure for Haard (941k cells)
 }
 
 
-def tiled_map(name: str = "Borkenberge", target_cells: int = 1_000_000):
-    """A ~``target_cells`` map made by tiling a bundled map (mirrored, so tiles join without seams)."""
+HAARD_SHAPE = (853, 1103)  # the original's biggest map (941k cells), which is not bundled
+
+
+def tiled_map(name: str = "Borkenberge", shape: tuple[int, int] = HAARD_SHAPE):
+    """A ``shape`` map made by tiling a bundled map (mirrored, so tiles join without seams); by default Haard's
+    size, whose figure the original reports."""
     base = load_map(name)
     a = base.classes
-    reps = int(np.ceil(np.sqrt(target_cells / a.size)))
-    row = np.concatenate([a if k % 2 == 0 else a[:, ::-1] for k in range(reps)], axis=1)
-    grid = np.concatenate([row if k % 2 == 0 else row[::-1] for k in range(reps)], axis=0)
-    cols = int(np.ceil(target_cells / grid.shape[0]))
-    return LandCoverMap(name=f"{name}_1M", classes=np.ascontiguousarray(grid[:, :cols]), cell_size=base.cell_size,
-                        crs=base.crs, transform=None, source=None)
+    reps_r, reps_c = -(-shape[0] // a.shape[0]), -(-shape[1] // a.shape[1])
+    row = np.concatenate([a if k % 2 == 0 else a[:, ::-1] for k in range(reps_c)], axis=1)
+    grid = np.concatenate([row if k % 2 == 0 else row[::-1] for k in range(reps_r)], axis=0)
+    cells = shape[0] * shape[1]
+    return LandCoverMap(name=f"{name}_{cells // 1000}k", classes=np.ascontiguousarray(grid[: shape[0], : shape[1]]),
+                        cell_size=base.cell_size, crs=base.crs, transform=None, source=None)
 
 
 def time_fire(land, fire_percentage: float, envs: int, steps: int, warmup: int, seed: int = 0) -> dict:
@@ -199,6 +204,7 @@ def time_fire(land, fire_percentage: float, envs: int, steps: int, warmup: int, 
             "mean_burning_end": float(stats["burning"].mean()),
             "particles_end": float((stats["convection"] + stats["radiation"]).mean()),
             "dropped": int(stats["dropped_convection"].sum() + stats["dropped_radiation"].sum()),
+            "layout": sim.layout, "dropped_blocks": int(stats["dropped_blocks"].sum()),
             "memory_bytes_per_env": sim.memory_bytes_per_env()}
 
 
@@ -222,8 +228,75 @@ def fire_speed(env_counts=(1, 16, 64, 256, 1024), steps: int = 50_000, warmup: i
     return {"arch": arch, "threads": threads or os.cpu_count(), "cpu_count": os.cpu_count(), "runs": runs}
 
 
+def fire_footprint(land, fire_percentage: float, steps: int, layout: str = "auto", envs: int = 1,
+                   seed: int = 0) -> dict:
+    """Memory of one env (allocated, so also its peak) and what the fire used of it over ``steps`` updates from
+    a reset, then the time of resetting env 0 alone (the cost that follows the footprint in the sparse layout)."""
+    cfg = IgnitionConfig(fire_percentage=fire_percentage, clusters=2)
+    sim = FireSim(land, FireConfig(layout=layout), WindConfig(), cfg, num_envs=envs, seed=seed)
+    one = np.zeros(envs, np.int32)
+    one[0] = 1
+    sim.reset()
+    sim.reset(one)  # compiles the reset kernel before it is timed
+    chunk = max(1, steps // 10)
+    for _ in range(-(-steps // chunk)):  # the pool only grows within an episode: the last count is its peak
+        sim.step(chunk)
+    stats = sim.stats()
+    peak_blocks = int(stats["blocks"].max())
+    t0 = time.perf_counter()
+    sim.reset(one)
+    sim.stats()  # waits for the kernel
+    reset_s = time.perf_counter() - t0
+    return {"map": land.name, "cells": land.rows * land.cols, "fire_percentage": fire_percentage, "envs": envs,
+            "steps": chunk * -(-steps // chunk), "layout": sim.layout, "block_capacity": sim.block_capacity,
+            "blocks_total": sim.num_blocks, "peak_blocks": peak_blocks,
+            "dropped_blocks": int(stats["dropped_blocks"].sum()),
+            "dropped_particles": int(stats["dropped_convection"].sum() + stats["dropped_radiation"].sum()),
+            "lit": int(stats["burning"].max() + stats["burned"].max()),
+            "memory_bytes_per_env": sim.memory_bytes_per_env(), "reset_s": reset_s}
+
+
+FOOTPRINT_HEADER = (f"{'map':<16}{'cells':>9}{'ign':>7}{'layout':>8}{'MiB/env':>9}{'blocks used':>14}"
+                    f"{'dropped':>9}{'reset ms':>10}")
+
+
+def format_footprint_row(r: dict) -> str:
+    used = f"{r['peak_blocks']}/{r['block_capacity']}" if r["layout"] == "sparse" else "-"
+    return (f"{r['map']:<16}{r['cells']:>9}{r['fire_percentage'] * 100:>6.1f}%{r['layout']:>8}"
+            f"{r['memory_bytes_per_env'] / 2**20:>9.2f}{used:>14}{r['dropped_blocks'] + r['dropped_particles']:>9}"
+            f"{r['reset_s'] * 1e3:>10.2f}")
+
+
+def _rss_child(queue, envs: int, steps: int, arch: str, threads: int | None) -> None:
+    import resource
+
+    from roshan.runtime import init_taichi
+
+    init_taichi(arch, threads)
+    sim = FireSim(tiled_map(), ignition=IgnitionConfig(fire_percentage=0.015, clusters=2), num_envs=envs)
+    sim.reset()
+    sim.step(steps)
+    stats = sim.stats()
+    queue.put({"envs": envs, "steps": steps, "layout": sim.layout,
+               "max_rss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+               "dropped_blocks": int(stats["dropped_blocks"].sum())})
+
+
+def big_map_rss(envs: int = 64, steps: int = 500, arch: str = "cpu", threads: int | None = None) -> dict:
+    """Peak RSS of a fresh process running ``envs`` envs of the 941k-cell map for ``steps`` updates."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    queue = ctx.Queue()
+    child = ctx.Process(target=_rss_child, args=(queue, envs, steps, arch, threads))
+    child.start()
+    out = queue.get()
+    child.join()
+    return out
+
+
 FIRE_SPEED_HEADER = (f"{'map':<16}{'cells':>9}{'ign':>7}{'E':>6}{'env-steps/s':>14}{'burning upd/s':>15}"
-                     f"{'x original':>12}{'KiB/env':>9}{'dropped':>9}")
+                     f"{'x original':>12}{'KiB/env':>9}{'layout':>8}{'dropped':>9}")
 
 
 def format_fire_row(r: dict) -> str:
@@ -231,7 +304,8 @@ def format_fire_row(r: dict) -> str:
     sp = f"{r['speedup_vs_original']:.1f}" if r["speedup_vs_original"] else "-"
     return (f"{r['map']:<16}{r['cells']:>9}{r['fire_percentage'] * 100:>6.1f}%{r['envs']:>6}"
             f"{r['env_steps_per_s']:>14,.0f}{r['burning_cell_updates_per_s']:>15,.0f}{sp:>12}"
-            f"{r['memory_bytes_per_env'] / 1024:>9.1f}{r['dropped']:>9}")
+            f"{r['memory_bytes_per_env'] / 1024:>9.1f}{r.get('layout', 'dense'):>8}"
+            f"{r['dropped'] + r.get('dropped_blocks', 0):>9}")
 
 
 def format_fire_speed(report: dict) -> str:

@@ -312,6 +312,10 @@ def summary_lines(result: SimulationResult) -> list[str]:
     dropped = int(np.sum(last["dropped_convection"]) + np.sum(last["dropped_radiation"]))
     if dropped:
         lines.append(f"WARNING: {dropped} particles dropped (pool full); raise fire.conv_capacity / rad_capacity")
+    dropped_blocks = int(np.sum(last.get("dropped_blocks", 0)))
+    if dropped_blocks:
+        lines.append(f"WARNING: {dropped_blocks} cell writes found the sparse block pool full (the fire outgrew it); "
+                     "raise fire.block_capacity or set fire.layout: dense")
     if result.drones is not None:
         lines.extend(_drone_lines(result.drones))
     lines.append(f"memory per env: {t['memory_bytes_per_env'] / 1024:.1f} KiB")

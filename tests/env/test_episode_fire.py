@@ -33,7 +33,7 @@ def test_ever_lit_equals_the_final_cells_of_an_episode():
             break
     ended = (env.terminations | env.truncations).nonzero().flatten().tolist()
     assert ended, "the drones left the map and no episode ended"
-    cells = env.fire.cells.to_numpy()[:, :, 0]  # C_STATE of every cell
+    cells = env.fire.states()  # the state of every cell
     n = env.fire.num_cells
     for e in ended:
         state = cells[e]

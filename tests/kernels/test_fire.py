@@ -22,7 +22,7 @@ def ignite(sim, cells, env=None):
 
 
 def states(sim):
-    return sim.cells.to_numpy()[:, :, 0]
+    return sim.states()
 
 
 def test_burned_cells_never_reignite_and_burning_cells_burn_out():

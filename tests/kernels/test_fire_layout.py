@@ -1,0 +1,103 @@
+"""The sparse cell layout (8 x 8 blocks from a per-env pool) against the dense one: the same fire, less memory."""
+
+import numpy as np
+import pytest
+
+from roshan.config import FireConfig, IgnitionConfig
+from roshan.kernels.fire import BLOCK_CELLS, FireSim, block_grid, choose_layout, default_block_capacity
+from roshan.maps import BURNING, load_map
+
+DYNAMIC_STATS = ("burning", "burned", "convection", "radiation", "dropped_convection", "dropped_radiation",
+                 "flooded", "extinguished", "initial_fires")
+
+
+def run_with_water_and_a_reset(layout: str, pattern: str, **fire) -> FireSim:
+    """Fire, water on two burning cells and one unburned cell per env, a reset of env 1, more fire."""
+    sim = FireSim(load_map("54x71_Woods"), FireConfig(layout=layout, **fire),
+                  ignition=IgnitionConfig(fire_percentage=0.05, pattern=pattern, clusters=2), num_envs=3, seed=11)
+    sim.reset()
+    sim.step(1200)
+    burning = sim.burning.to_numpy()
+    counts = sim.stats()["burning"]
+    requests = np.full((3, 3), -1, np.int32)
+    for e in range(3):
+        requests[e, : min(2, counts[e])] = burning[e, : min(2, counts[e])]
+        requests[e, 2] = 7 * sim.cols + 3
+    extinguished = np.zeros_like(requests)
+    sim.flood(requests, extinguished)
+    assert extinguished.sum() >= 3, "the drops must hit burning cells"
+    sim.step(800)
+    sim.reset(np.array([0, 1, 0], np.int32))
+    sim.step(600)
+    return sim
+
+
+@pytest.mark.parametrize("pattern", ["cluster", "ring", "scattered"])
+def test_the_sparse_layout_gives_the_dense_trajectory(pattern):
+    dense = run_with_water_and_a_reset("dense", pattern)
+    # The dense run's particle pools, so that only the layout differs.
+    sparse = run_with_water_and_a_reset("sparse", pattern, conv_capacity=dense.conv_capacity,
+                                        rad_capacity=dense.rad_capacity)
+    assert (dense.layout, sparse.layout) == ("dense", "sparse")
+    d_ints, d_timers = dense.cell_records()
+    s_ints, s_timers = sparse.cell_records()
+    np.testing.assert_array_equal(s_ints, d_ints)
+    np.testing.assert_array_equal(s_timers[..., :4], d_timers[..., :4])  # the flood timer is read only while flooded
+    d_stats, s_stats = dense.stats(), sparse.stats()
+    for name in DYNAMIC_STATS:
+        np.testing.assert_array_equal(s_stats[name], d_stats[name], err_msg=name)
+    for e in range(3):
+        for a, b in zip(sparse.particles(e), dense.particles(e), strict=True):
+            np.testing.assert_array_equal(a, b)
+    assert np.all(s_stats["dropped_blocks"] == 0)
+    assert np.all(s_stats["blocks"] > 0) and np.all(d_stats["blocks"] == 0)
+
+
+def test_memory_follows_the_footprint_and_a_reset_hands_the_blocks_back():
+    sim = FireSim(load_map("81x129_Campsite"), FireConfig(layout="sparse"),
+                  ignition=IgnitionConfig(fire_percentage=0.01), num_envs=2, seed=3)
+    rows, cols = block_grid(sim.rows, sim.cols)
+    sim.reset()
+    at_reset = sim.stats()["blocks"]
+    sim.step(3000)
+    grown = sim.stats()["blocks"]
+    assert np.all(grown > at_reset), "particles and spread touch new blocks"
+    assert np.all(grown < rows * cols // 2), "a 1 % fire touches a minority of the map's blocks"
+    sim.reset(np.array([1, 0], np.int32))
+    after = sim.stats()["blocks"]
+    assert after[0] < grown[0] and after[1] == grown[1]
+    # A block given back holds nothing of the last episode: the env's fire is a fresh one.
+    state = sim.states()[0]
+    assert (state == BURNING).sum() == sim.stats()["initial_fires"][0]
+
+
+def test_a_full_block_pool_is_counted_not_silent():
+    sim = FireSim(load_map("54x71_Woods"), FireConfig(layout="sparse", block_capacity=3),
+                  ignition=IgnitionConfig(fire_percentage=0.05), num_envs=2, seed=1)
+    sim.reset()
+    sim.step(1000)
+    stats = sim.stats()
+    assert np.all(stats["blocks"] == 3)
+    assert np.all(stats["dropped_blocks"] > 0)
+    lit = (sim.states() == BURNING).sum(axis=1)
+    assert np.all(lit <= 3 * BLOCK_CELLS)
+
+
+def test_auto_layout_is_sparse_only_where_the_pool_is_under_half_the_map():
+    def auto(rows, cols, pct):
+        blocks = np.prod(block_grid(rows, cols))
+        return choose_layout("auto", rows * cols, default_block_capacity(int(blocks), pct))
+
+    assert auto(35, 36, 0.015) == "dense"  # 25 blocks: the pool would be the whole map
+    assert auto(500, 690, 0.015) == "sparse"
+    assert auto(853, 1103, 0.015) == "sparse"
+    assert auto(853, 1103, 0.35) == "dense"  # a 35 % fire reaches most blocks
+    assert choose_layout("dense", 10**6, 64) == "dense" and choose_layout("sparse", 100, 64) == "sparse"
+
+
+def test_sparse_memory_per_env_meets_the_big_map_targets():
+    sim = FireSim(load_map("Borkenberge"), ignition=IgnitionConfig(fire_percentage=0.015), num_envs=1)
+    dense = FireSim(load_map("Borkenberge"), FireConfig(layout="dense"),
+                    ignition=IgnitionConfig(fire_percentage=0.015), num_envs=1)
+    assert sim.layout == "sparse"
+    assert sim.memory_bytes_per_env() <= 4 * 2**20 < dense.memory_bytes_per_env() / 10
