@@ -67,16 +67,19 @@ BLOCK_SHIFT = 6  # log2(cells per block)
 BLOCK_CELLS = 1 << BLOCK_SHIFT
 
 
-def default_capacities(num_cells: int, sparse_cells: int | None = None) -> tuple[int, int]:
-    """Particle pool sizes per env: one convection and two radiation slots per cell, at least 1024 / 2048.
+def default_capacities(num_cells: int, sparse_cells: int | None = None, num_fires: int = 0) -> tuple[int, int]:
+    """Particle pool sizes per env.
 
-    The reference peaks (shared/reference) stay below 0.4 convection and 0.8 radiation particles per cell of a
-    map that burns whole. In the sparse layout the fire reaches at most ``sparse_cells`` cells (its block
-    pool), and a 1.5 % fire on a 941k-cell map used under 1 % of the dense pools, so the pools hold a quarter
-    and a half particle per pool cell there.
+    Dense layout: one convection and two radiation slots per cell, at least 1024 / 2048; the reference peaks
+    (shared/reference) stay below 0.4 convection and 0.8 radiation particles per cell of a map that burns
+    whole. Sparse layout (a fire that stays small next to its map): 1.5 slots of each kind per initial fire,
+    at least a sixteenth of the block pool's cells. Measured over 50,000 updates of a 1.5 % fire (2 clusters,
+    seeds 0 and 1): peaks of 0.58-0.77 convection and 0.6-0.66 radiation particles per initial fire on
+    Borkenberge and the 941k-cell map.
     """
     if sparse_cells is not None:
-        return max(1024, sparse_cells // 4), max(2048, sparse_cells // 2)
+        conv = rad = max(3 * num_fires // 2, sparse_cells // 16)
+        return max(1024, conv), max(2048, rad)
     return max(1024, num_cells), max(2048, 2 * num_cells)
 
 
@@ -85,13 +88,16 @@ def block_grid(rows: int, cols: int) -> tuple[int, int]:
     return -(-rows // BLOCK_SIDE), -(-cols // BLOCK_SIDE)
 
 
-def default_block_capacity(num_blocks: int, fire_percentage: float) -> int:
-    """Blocks per env the sparse pool holds: 6 % of the map's blocks plus twice the ignited fraction, >= 64.
+def default_block_capacity(num_blocks: int, num_fires: int) -> int:
+    """Blocks per env the sparse pool holds: six per 64 initial fires plus 200, at most the map's.
 
-    Measured (issue 17): over 100,000 updates a 1.5 % fire touched 2.8-5.4 % of the 8 x 8 blocks of a
-    941k-cell map, a 35 % fire 45-53 %.
+    The footprint grows with the fires lit at the reset, not with the map: over 50,000 updates of a 1.5 %
+    fire (2 clusters) the fire, its particles and the generator touched 412-517 blocks of Borkenberge (5,468
+    fires) and 664-879 of the 941k-cell map (14,112 fires), 3-6 blocks per 64 fires (`roshan bench memory`
+    and seeds 0 and 1). This gives those maps 1.4x and 1.7x the largest peak, within the memory targets of
+    4 and 8 MiB per env.
     """
-    return min(num_blocks, max(64, math.ceil(num_blocks * (0.06 + 2.0 * fire_percentage))))
+    return min(num_blocks, 6 * -(-num_fires // BLOCK_CELLS) + 200)
 
 
 def choose_layout(layout: str, num_cells: int, block_capacity: int) -> str:
@@ -189,14 +195,15 @@ class FireSim:
         """Layout, record and list capacities, and particle pool sizes (see the module docstring)."""
         self.block_rows, self.block_cols = block_grid(self.rows, self.cols)
         self.num_blocks = self.block_rows * self.block_cols
-        auto_blocks = default_block_capacity(self.num_blocks, ignition.fire_percentage)
+        num_fires = int(np.float32(self.num_cells) * np.float32(ignition.fire_percentage))  # as the generator's
+        auto_blocks = default_block_capacity(self.num_blocks, num_fires)
         self.block_capacity = min(self.num_blocks, fire.block_capacity or auto_blocks)
         self.layout = choose_layout(fire.layout, self.num_cells, self.block_capacity)
         self.sparse = self.layout == "sparse"
         if self.sparse:
             self.record_capacity = self.block_capacity * BLOCK_CELLS
             self.list_capacity = min(self.num_cells, self.record_capacity)  # a listed cell has a record
-            auto_conv, auto_rad = default_capacities(self.num_cells, self.list_capacity)
+            auto_conv, auto_rad = default_capacities(self.num_cells, self.list_capacity, num_fires)
         else:
             self.block_capacity = 0
             self.record_capacity = self.list_capacity = self.num_cells
@@ -273,7 +280,8 @@ class FireSim:
         """
         check_built_in_this_runtime(self._taichi_generation, "FireSim.reset(): this simulator")
         mask = self._all if mask is None else self.int32_array(mask, (self.num_envs,), "reset mask")
-        self._reset_envs(mask, self.seed_key)
+        self._clear_envs(mask)
+        self._start_envs(mask, self.seed_key)
 
     @property
     def seed_key(self) -> int:
@@ -380,18 +388,26 @@ class FireSim:
     # ------------------------------------------------------------------------------------------ kernels
 
     @ti.kernel
-    def _reset_envs(self, mask: ti.types.ndarray(dtype=ti.i32, ndim=1), seed_key: ti.u32):
+    def _clear_envs(self, mask: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+        """The first half of a reset: forget the last episode's cells (the cost that follows the footprint)."""
         if ti.static(self.sparse):
             for e, k in ti.ndrange(self.num_envs, self.block_capacity):  # hand back the blocks the episode used
                 if mask[e] != 0 and k < self.counts[e, N_BLOCKS]:
                     self.block_slot[e, self.slot_block[e, k]] = -1
-        for e in range(self.num_envs):  # new episode: new key, counters, wind
-            if mask[e] != 0:
-                self.begin_episode(e, seed_key)
-        if ti.static(not self.sparse):
+            for e in range(self.num_envs):
+                if mask[e] != 0:
+                    self.counts[e, N_BLOCKS] = 0
+        else:
             for e, c in ti.ndrange(self.num_envs, self.num_cells):  # every cell of the reset envs, in parallel
                 if mask[e] != 0:
                     self._reset_record(e, c, self.land[c])
+
+    @ti.kernel
+    def _start_envs(self, mask: ti.types.ndarray(dtype=ti.i32, ndim=1), seed_key: ti.u32):
+        """The second half: a new key, counters and wind, and the initial fires."""
+        for e in range(self.num_envs):
+            if mask[e] != 0:
+                self.begin_episode(e, seed_key)
         for v in range(self.num_envs * self.env_pad):  # the generator is serial per env
             e = v // self.env_pad
             if v % self.env_pad == 0 and mask[e] != 0:

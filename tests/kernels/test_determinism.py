@@ -6,6 +6,7 @@ import sys
 import textwrap
 
 import numpy as np
+import pytest
 
 from roshan.config import IgnitionConfig
 from roshan.kernels.fire import FireSim
@@ -64,10 +65,11 @@ SCRIPT = textwrap.dedent("""
     import numpy as np
     from roshan.runtime import init_taichi
     init_taichi("cpu", threads=int(sys.argv[1]))
-    from roshan.config import IgnitionConfig
+    from roshan.config import FireConfig, IgnitionConfig
     from roshan.kernels.fire import FireSim
     from roshan.maps import load_map
-    sim = FireSim(load_map("21x21_Field"), ignition=IgnitionConfig(fire_percentage=0.2), num_envs=16, seed=3)
+    sim = FireSim(load_map("21x21_Field"), FireConfig(layout=sys.argv[2]), ignition=IgnitionConfig(fire_percentage=0.2),
+                  num_envs=16, seed=3)
     sim.reset(); sim.step(2000)
     ints, timers = sim.cell_records()
     h = hashlib.sha256(ints.tobytes() + timers.tobytes() + sim.conv.to_numpy().tobytes()
@@ -76,8 +78,9 @@ SCRIPT = textwrap.dedent("""
 """)
 
 
-def test_bit_identical_across_thread_counts():
-    digests = [subprocess.run([sys.executable, "-c", SCRIPT, str(t)], capture_output=True, text=True, check=True)
-               .stdout.strip().splitlines()[-1] for t in (1, 2)]
+@pytest.mark.parametrize("layout", ["dense", "sparse"])
+def test_bit_identical_across_thread_counts(layout):
+    digests = [subprocess.run([sys.executable, "-c", SCRIPT, str(t), layout], capture_output=True, text=True,
+                              check=True).stdout.strip().splitlines()[-1] for t in (1, 2)]
     assert digests[0] == digests[1]
     assert len(digests[0]) == len(hashlib.sha256().hexdigest())
