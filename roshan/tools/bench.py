@@ -28,6 +28,7 @@ from roshan.kernels.fire import FireSim
 from roshan.maps import LandCoverMap, load_map
 from roshan.runs.collect import PPOLearner
 from roshan.runs.envs import make_env
+from roshan.runtime import init_taichi
 
 REFERENCE_QUANTITIES = ("burning", "burned", "convection", "radiation")
 
@@ -278,18 +279,23 @@ def format_footprint_row(r: dict) -> str:
             f"{r['clear_s'] * 1e3:>10.3f}{r['fires_s'] * 1e3:>10.2f}")
 
 
+def _peak_rss_bytes() -> int:
+    """This process's peak resident set (VmHWM). Not getrusage's ru_maxrss: Linux keeps that across the exec of
+    a spawned child, so it would report the parent's RSS at the fork."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) * 1024
+    raise RuntimeError("no VmHWM in /proc/self/status (Linux only)")
+
+
 def _rss_child(queue, envs: int, steps: int, arch: str, threads: int | None) -> None:
-    import resource
-
-    from roshan.runtime import init_taichi
-
     init_taichi(arch, threads)
     sim = FireSim(tiled_map(), ignition=IgnitionConfig(fire_percentage=0.015, clusters=2), num_envs=envs)
     sim.reset()
     sim.step(steps)
     stats = sim.stats()
     queue.put({"envs": envs, "steps": steps, "layout": sim.layout,
-               "max_rss_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+               "max_rss_bytes": _peak_rss_bytes(),
                "dropped_blocks": int(stats["dropped_blocks"].sum())})
 
 
