@@ -566,7 +566,8 @@ def bench_fire(env_counts, steps, warmup, big, json_path, arch, threads):
 @ARCH
 @THREADS
 def bench_memory(steps, rss_envs, rss_steps, json_path, arch, threads):
-    """Fire memory per env and reset cost, sparse (auto) against dense: 35x36_Woods, Borkenberge, 941k cells.
+    """Fire memory per env and reset cost, sparse against dense: 35x36_Woods, Borkenberge, 941k cells (auto
+    picks sparse there once the dense records of all envs would take over 1 GiB).
 
     A reset after an episode of --steps updates (median of 3 episodes; one at 35 %) in its two halves: "clear"
     forgets the last episode (what the sparse layout makes follow the footprint), "fires" lights the new ones."""
@@ -578,7 +579,8 @@ def bench_memory(steps, rss_envs, rss_steps, json_path, arch, threads):
     click.echo(b.FOOTPRINT_HEADER)
     for land in (b.load_map("35x36_Woods"), b.load_map("Borkenberge"), b.tiled_map()):
         for pct, n, episodes in ((0.015, steps, 3), (0.35, max(1, steps // 10), 1)):
-            for layout in ("auto", "dense"):
+            big = land.rows * land.cols > 100_000 and pct < 0.1  # where auto picks sparse for many envs
+            for layout in ("sparse", "dense") if big else ("auto",):
                 r = b.fire_footprint(land, pct, n, layout, episodes)
                 rows.append(r)
                 click.echo(b.format_footprint_row(r))

@@ -100,12 +100,31 @@ def default_block_capacity(num_blocks: int, num_fires: int) -> int:
     return min(num_blocks, 6 * -(-num_fires // BLOCK_CELLS) + 200)
 
 
-def choose_layout(layout: str, num_cells: int, block_capacity: int) -> str:
+DENSE_BUDGET_BYTES = 1 << 30  # auto: every env stays dense while the dense records of all envs fit in 1 GiB
+RECORD_BYTES = 4 * (CELL_FIELDS + 1) + 8 * TIMER_FIELDS + 1  # ints, mark, f64 timers, lit flag
+LIST_BYTES = 3 * 4  # burning, exposed and flooded lists, one i32 each per record
+
+
+def dense_bytes_per_env(num_cells: int) -> int:
+    """Field memory of one env in the dense layout (records, lists and the default particle pools)."""
+    conv, rad = default_capacities(num_cells)
+    return num_cells * (RECORD_BYTES + LIST_BYTES) + 4 * (pt.CONV_FIELDS * conv + pt.RAD_FIELDS * rad)
+
+
+def choose_layout(layout: str, num_cells: int, block_capacity: int, num_envs: int = 1) -> str:
     """``auto`` is sparse where the block pool holds under half the map's cells (elsewhere the indirection
-    costs more than it saves)."""
+    costs more than it saves) and the dense layout of all ``num_envs`` envs would take over 1 GiB.
+
+    The memory bound, not the map alone, decides, because the sparse layout is slower per update on a big map:
+    every record access first reads the cell's block slot, a dependent load the dense layout does not have
+    (one env on Borkenberge or the 941k-cell map: 0.66-0.68x the dense updates per second, BENCHMARKS "Fire
+    memory"). A few envs of a big map fit dense and run faster; many do not fit any other way.
+    """
     if layout != "auto":
         return layout
-    return "sparse" if block_capacity * BLOCK_CELLS * 2 <= num_cells else "dense"
+    if block_capacity * BLOCK_CELLS * 2 > num_cells:
+        return "dense"
+    return "sparse" if num_envs * dense_bytes_per_env(num_cells) > DENSE_BUDGET_BYTES else "dense"
 
 
 def env_loop_padding(num_envs: int) -> int:
@@ -198,7 +217,7 @@ class FireSim:
         num_fires = int(np.float32(self.num_cells) * np.float32(ignition.fire_percentage))  # as the generator's
         auto_blocks = default_block_capacity(self.num_blocks, num_fires)
         self.block_capacity = min(self.num_blocks, fire.block_capacity or auto_blocks)
-        self.layout = choose_layout(fire.layout, self.num_cells, self.block_capacity)
+        self.layout = choose_layout(fire.layout, self.num_cells, self.block_capacity, self.num_envs)
         self.sparse = self.layout == "sparse"
         if self.sparse:
             self.record_capacity = self.block_capacity * BLOCK_CELLS
@@ -355,9 +374,8 @@ class FireSim:
 
     def memory_bytes_per_env(self) -> int:
         """Bytes of Taichi field memory one env holds (cell records, lists, block tables, particle pools)."""
-        per_record = 4 * (CELL_FIELDS + 1) + 8 * TIMER_FIELDS + 1
         tables = 4 * (self.num_blocks + self.block_capacity) if self.sparse else 0
-        return (self.record_capacity * per_record + 3 * 4 * self.list_capacity + tables
+        return (self.record_capacity * RECORD_BYTES + LIST_BYTES * self.list_capacity + tables
                 + 4 * (pt.CONV_FIELDS * self.conv_capacity + pt.RAD_FIELDS * self.rad_capacity)
                 + 4 * (N_COUNTS + 8))
 

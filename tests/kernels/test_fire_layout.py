@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 
 from roshan.config import FireConfig, IgnitionConfig
-from roshan.kernels.fire import BLOCK_CELLS, FireSim, block_grid, choose_layout, default_block_capacity
+from roshan.kernels.fire import (
+    BLOCK_CELLS,
+    FireSim,
+    block_grid,
+    choose_layout,
+    default_block_capacity,
+    dense_bytes_per_env,
+)
 from roshan.maps import BURNING, load_map
 
 DYNAMIC_STATS = ("burning", "burned", "convection", "radiation", "dropped_convection", "dropped_radiation",
@@ -83,20 +90,29 @@ def test_a_full_block_pool_is_counted_not_silent():
     assert np.all(lit <= 3 * BLOCK_CELLS)
 
 
-def test_auto_layout_is_sparse_only_where_the_pool_is_under_half_the_map():
-    def auto(rows, cols, pct):
+def test_auto_layout_is_sparse_where_the_pool_is_small_and_dense_envs_would_not_fit():
+    def auto(rows, cols, pct, envs=1):
         blocks = int(np.prod(block_grid(rows, cols)))
-        return choose_layout("auto", rows * cols, default_block_capacity(blocks, int(rows * cols * pct)))
+        return choose_layout("auto", rows * cols, default_block_capacity(blocks, int(rows * cols * pct)), envs)
 
-    assert auto(35, 36, 0.015) == "dense"  # 25 blocks: the pool would be the whole map
-    assert auto(481, 758, 0.015) == "sparse"  # Borkenberge
-    assert auto(853, 1103, 0.015) == "sparse"
-    assert auto(853, 1103, 0.35) == "dense"  # a 35 % fire reaches most blocks
+    assert auto(35, 36, 0.015, 4096) == "dense"  # 25 blocks: the pool would be the whole map
+    # Borkenberge: 54.6 MiB dense per env, so 18 envs fit in 1 GiB and 19 do not.
+    assert auto(481, 758, 0.015, 18) == "dense" and auto(481, 758, 0.015, 19) == "sparse"
+    assert auto(853, 1103, 0.015, 1) == "dense"  # one env of a big map runs faster dense
+    assert auto(853, 1103, 0.015, 64) == "sparse"
+    assert auto(853, 1103, 0.35, 64) == "dense"  # a 35 % fire reaches most blocks
     assert choose_layout("dense", 10**6, 64) == "dense" and choose_layout("sparse", 100, 64) == "sparse"
 
 
+def test_dense_bytes_estimate_is_what_a_dense_env_holds():
+    land = load_map("54x71_Woods")
+    sim = FireSim(land, FireConfig(layout="dense"), num_envs=1)
+    assert abs(sim.memory_bytes_per_env() - dense_bytes_per_env(land.rows * land.cols)) < 1024
+
+
 def test_sparse_memory_per_env_meets_the_big_map_targets():
-    sim = FireSim(load_map("Borkenberge"), ignition=IgnitionConfig(fire_percentage=0.015), num_envs=1)
+    sim = FireSim(load_map("Borkenberge"), FireConfig(layout="sparse"), ignition=IgnitionConfig(fire_percentage=0.015),
+                  num_envs=1)
     dense = FireSim(load_map("Borkenberge"), FireConfig(layout="dense"),
                     ignition=IgnitionConfig(fire_percentage=0.015), num_envs=1)
     assert sim.layout == "sparse"
