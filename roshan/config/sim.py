@@ -44,6 +44,12 @@ class FireConfig(Section):
                              "particles or water first touch them (sparse: far less memory on a big map, "
                              "~0.67x the updates per second); auto = sparse where the pool is under half the map "
                              "and the dense records of all envs would take over 1 GiB")
+    parallel: str = choice("auto", ("auto", "envs", "chunks"),
+                           doc="how an update spreads over CPU threads: a thread per env, each env's lists "
+                               "serially (envs), or each env's particle and cell lists cut into chunks over all "
+                               "threads (chunks, for fewer envs than threads on a big map); the same trajectory "
+                               "bit for bit. auto = chunks on the CPU where E < threads and an env lights >= 250,000 "
+                               "fires (where it measured faster)")
     block_capacity: int = num(0, 0, doc="8x8 blocks per env in the sparse layout; 0 = auto from the map size and "
                                         "ignition.fire_percentage (a full pool is counted as dropped_blocks)")
 

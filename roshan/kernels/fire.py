@@ -24,47 +24,56 @@ import math
 
 import numpy as np
 import taichi as ti
+import taichi.lang.impl as impl
 
 from roshan.config import FireConfig, IgnitionConfig, WindConfig
 from roshan.kernels import particles as pt
 from roshan.kernels import rng
+from roshan.kernels.fire_parallel import ChunkedStep
+from roshan.kernels.fire_records import (
+    BLOCK_CELLS,
+    BLOCK_SHIFT,
+    BLOCK_SIDE,
+    BURNED_OUT,
+    C_FLAGS,
+    C_PERIODS,
+    C_STATE,
+    C_VISIT,
+    CELL_FIELDS,
+    EMIT_CONV,
+    EMIT_RAD,
+    FLAG_BURNED_DOWN,
+    FLAG_DRAWN,
+    FLAG_EXPOSED,
+    FLAG_EXTINGUISHED,
+    N_BLOCKS,
+    N_BURNED,
+    N_BURNING,
+    N_CONV,
+    N_COUNTS,
+    N_DROP_BLOCK,
+    N_DROP_CONV,
+    N_DROP_RAD,
+    N_EXPOSED,
+    N_EXTINGUISHED,
+    N_FLOODED,
+    N_IGNITED_INIT,
+    N_IGNITION_SHORT,
+    N_LIT,
+    N_RAD,
+    N_STEP,
+    NEVER,
+    STAT_NAMES,
+    T_BURN_LEFT,
+    T_BURN_TIME,
+    T_EXPOSURE,
+    T_FLOOD,
+    T_IGN,
+    TIMER_FIELDS,
+)
 from roshan.kernels.ignition import PATTERNS, light_initial_fires
 from roshan.maps import BURNED, BURNING, CLASSES, FLOODED, GENERIC_UNBURNED, LandCoverMap
 from roshan.runtime import check_built_in_this_runtime, check_field_room, current_arch, ensure_taichi, taichi_generation
-
-# Cell records: integers (state, flags, visit stamp, emission periods) and f64 timers (seconds).
-C_STATE, C_FLAGS, C_VISIT, C_PERIODS = range(4)
-CELL_FIELDS = 4
-T_IGN, T_BURN_LEFT, T_BURN_TIME, T_EXPOSURE, T_FLOOD = range(5)
-TIMER_FIELDS = 5
-FLAG_EXPOSED = 1  # the cell is in the exposed ("ticking") list
-FLAG_BURNED_DOWN = 2  # burned out completely once (a flood returns it to BURNED)
-FLAG_DRAWN = 4  # this episode's durations, periods and exposure/burn timers are set (see _draw_durations)
-FLAG_EXTINGUISHED = 8  # water put this cell out while it burned, this episode (read by rendering only)
-NEVER = -1.0  # tau_ign of cells that cannot ignite (the reference skips their exposure)
-
-# Per-env counters (E, N_COUNTS): list lengths, statistics and the update count since the last reset.
-# A row is padded to 16 ints = one 64-byte cache line, so threads stepping neighbouring envs do not write
-# to the same line (false sharing halved two-thread throughput below ~1000 envs).
-(N_BURNING, N_EXPOSED, N_FLOODED, N_CONV, N_RAD, N_BURNED, N_DROP_CONV, N_DROP_RAD, N_EXTINGUISHED,
- N_IGNITED_INIT, N_IGNITION_SHORT, N_STEP, N_LIT, N_BLOCKS, N_DROP_BLOCK) = range(15)
-N_COUNTS = 16
-STAT_NAMES = {
-    "burning": N_BURNING,
-    "burned": N_BURNED,
-    "convection": N_CONV,
-    "radiation": N_RAD,
-    "dropped_convection": N_DROP_CONV,
-    "dropped_radiation": N_DROP_RAD,
-    "flooded": N_FLOODED,
-    "extinguished": N_EXTINGUISHED,
-    "initial_fires": N_IGNITED_INIT,
-    "blocks": N_BLOCKS,
-    "dropped_blocks": N_DROP_BLOCK,
-}
-BLOCK_SIDE = 8  # sparse layout: cells per block side
-BLOCK_SHIFT = 6  # log2(cells per block)
-BLOCK_CELLS = 1 << BLOCK_SHIFT
 
 
 def default_capacities(num_cells: int, sparse_cells: int | None = None, num_fires: int = 0) -> tuple[int, int]:
@@ -127,6 +136,28 @@ def choose_layout(layout: str, num_cells: int, block_capacity: int, num_envs: in
     return "sparse" if num_envs * dense_bytes_per_env(num_cells) > DENSE_BUDGET_BYTES else "dense"
 
 
+# auto: the chunked update only where an env lights this many fires at its reset. Measured on this 2-core VM
+# (BENCHMARKS "A parallel path inside one env"): 2 threads give 1.31x the env-serial update with 329k fires
+# (941k-cell map, 35 %), and are slower with 128k (Borkenberge, 35 %) or at 1.5 %, where Taichi's ~30 us per
+# parallel task and ~100 us per kernel launch outweigh a 60-150 us update.
+CHUNKS_MIN_FIRES = 250_000
+
+
+def cpu_threads() -> int:
+    """Threads Taichi's CPU backend runs a parallel loop on."""
+    return max(1, impl.current_cfg().cpu_max_num_threads)
+
+
+def choose_parallel(parallel: str, num_envs: int, num_fires: int, threads: int | None = None) -> str:
+    """``auto`` is ``chunks`` on the CPU where the envs leave threads idle and the fire is huge, else ``envs``."""
+    if parallel != "auto":
+        return parallel
+    if current_arch() not in (None, "cpu"):
+        return "envs"  # not measured on a GPU
+    threads = cpu_threads() if threads is None else threads
+    return "chunks" if 1 < threads and num_envs < threads and num_fires >= CHUNKS_MIN_FIRES else "envs"
+
+
 def env_loop_padding(num_envs: int) -> int:
     """How far apart env indices sit in the index space of the heavy per-env loops.
 
@@ -137,10 +168,7 @@ def env_loop_padding(num_envs: int) -> int:
     """
     if current_arch() not in (None, "cpu") or num_envs == 1:
         return 1  # GPUs schedule one thread per iteration anyway; one env is one task whatever the padding
-    import taichi.lang.impl as impl
-
-    threads = max(1, impl.current_cfg().cpu_max_num_threads)
-    return max(1, -(-1024 * threads // num_envs))
+    return max(1, -(-1024 * cpu_threads() // num_envs))
 
 
 @ti.data_oriented
@@ -207,6 +235,8 @@ class FireSim:
         self.unit.from_numpy(np.stack([np.cos(angles), np.sin(angles)], axis=1).astype(np.float32))
         self.episode.fill(-1)
         self._all = np.ones(E, dtype=np.int32)
+        self.parallel = choose_parallel(fire.parallel, num_envs, self.num_fires)
+        self.chunked = ChunkedStep(self) if self.parallel == "chunks" else None
 
     # ------------------------------------------------------------------------------------------ setup
 
@@ -310,7 +340,9 @@ class FireSim:
     def step(self, n: int = 1) -> None:
         """Advance every env by ``n`` fire updates (n * dt seconds) in one kernel launch."""
         check_built_in_this_runtime(self._taichi_generation, "FireSim.step(): this simulator")
-        if n > 0:
+        if n > 0 and self.chunked is not None:
+            self.chunked.advance(n)
+        elif n > 0:
             self._advance(n)
 
     def flood(self, requests, extinguished) -> None:
@@ -373,7 +405,8 @@ class FireSim:
         return self.wind.to_numpy()
 
     def memory_bytes_per_env(self) -> int:
-        """Bytes of Taichi field memory one env holds (cell records, lists, block tables, particle pools)."""
+        """Bytes of Taichi field memory one env holds (cell records, lists, block tables, particle pools); the
+        chunked update adds one env's worth of scratch per simulator (``chunked.memory_bytes()``)."""
         tables = 4 * (self.num_blocks + self.block_capacity) if self.sparse else 0
         return (self.record_capacity * RECORD_BYTES + LIST_BYTES * self.list_capacity + tables
                 + 4 * (pt.CONV_FIELDS * self.conv_capacity + pt.RAD_FIELDS * self.rad_capacity)
@@ -825,41 +858,34 @@ class FireSim:
 
     @ti.func
     def _ignite(self, e, r, c):
-        self._draw_durations(e, r, c)
-        self.cells[e, r][C_STATE] = BURNING
-        if self.lit[e, r] == 0:
-            self.lit[e, r] = ti.u8(1)
-            self.counts[e, N_LIT] += 1
+        self.counts[e, N_LIT] += self._light(e, r, c)
         n = self.counts[e, N_BURNING]
         self.burning[e, n] = c
         self.counts[e, N_BURNING] = n + 1
+
+    @ti.func
+    def _light(self, e, r, c) -> ti.i32:
+        """The record half of an ignition (the list half is the caller's); 1 if the cell is lit for the first
+        time this episode."""
+        self._draw_durations(e, r, c)
+        self.cells[e, r][C_STATE] = BURNING
+        first = 0
+        if self.lit[e, r] == 0:
+            self.lit[e, r] = ti.u8(1)
+            first = 1
+        return first
 
     @ti.func
     def _burn(self, e, step_key):
         w = 0
         for k in range(self.counts[e, N_BURNING]):
             c = self.burning[e, k]
-            r = self._rec(e, c)
-            timer = self.timers[e, r]
-            before = timer[T_BURN_TIME]
-            after = before + ti.f64(self.dt)
-            left = timer[T_BURN_LEFT] - ti.f64(self.dt)
-            self.timers[e, r][T_BURN_TIME] = after
-            self.timers[e, r][T_BURN_LEFT] = left
-            # Emit when the burning time crosses a whole second k >= 1 that is a multiple of the period.
-            sec_old = ti.cast(before, ti.i32)
-            sec_new = ti.cast(ti.floor(after), ti.i32)
-            if sec_new != sec_old:
-                periods = self.cells[e, r][C_PERIODS]
-                if ti.static(self.conv_on):
-                    if sec_new % (periods & 0xFFFF) == 0:
-                        self._emit_convection(e, c, step_key)
-                if ti.static(self.rad_on):
-                    if sec_new % (periods >> 16) == 0:
-                        self._emit_radiation(e, c, step_key)
-            if left <= 0.0:
-                self.cells[e, r][C_STATE] = BURNED
-                self.cells[e, r][C_FLAGS] |= FLAG_BURNED_DOWN
+            emits = self._burn_tick(e, self._rec(e, c))
+            if (emits & EMIT_CONV) != 0:
+                self._emit_convection(e, c, step_key)
+            if (emits & EMIT_RAD) != 0:
+                self._emit_radiation(e, c, step_key)
+            if (emits & BURNED_OUT) != 0:
                 self.counts[e, N_BURNED] += 1
             else:
                 self.burning[e, w] = c
@@ -867,16 +893,38 @@ class FireSim:
         self.counts[e, N_BURNING] = w
 
     @ti.func
+    def _burn_tick(self, e, r) -> ti.i32:
+        """One update of a burning cell's record: its timers, and BURNED once its time is up. Returns what the
+        caller does with the cell, as bits: EMIT_CONV / EMIT_RAD (emit that particle) and BURNED_OUT."""
+        timer = self.timers[e, r]
+        before = timer[T_BURN_TIME]
+        after = before + ti.f64(self.dt)
+        left = timer[T_BURN_LEFT] - ti.f64(self.dt)
+        self.timers[e, r][T_BURN_TIME] = after
+        self.timers[e, r][T_BURN_LEFT] = left
+        # Emit when the burning time crosses a whole second k >= 1 that is a multiple of the period.
+        emits = 0
+        sec_old = ti.cast(before, ti.i32)
+        sec_new = ti.cast(ti.floor(after), ti.i32)
+        if sec_new != sec_old:
+            periods = self.cells[e, r][C_PERIODS]
+            if ti.static(self.conv_on):
+                if sec_new % (periods & 0xFFFF) == 0:
+                    emits |= EMIT_CONV
+            if ti.static(self.rad_on):
+                if sec_new % (periods >> 16) == 0:
+                    emits |= EMIT_RAD
+        if left <= 0.0:
+            self.cells[e, r][C_STATE] = BURNED
+            self.cells[e, r][C_FLAGS] |= FLAG_BURNED_DOWN
+            emits |= BURNED_OUT
+        return emits
+
+    @ti.func
     def _emit_convection(self, e, c, step_key):
         n = self.counts[e, N_CONV]
         if n < self.conv_capacity:
-            h = rng.key(step_key, c, rng.DOMAIN_EMISSION)
-            i = c // self.cols
-            j = c % self.cols
-            # The reference's particle constructor takes whole metres: the emission point is truncated.
-            x1 = ti.floor((i + rng.uniform(h)) * self.cell_size)
-            x2 = ti.floor((j + rng.uniform(rng.mix32(h))) * self.cell_size)
-            self.conv[e, n] = ti.Vector([x1, x2, 0.0, 0.0, self.conv_y_st], ti.f32)
+            self.conv[e, n] = self.convection_from(c, step_key)
             self.counts[e, N_CONV] = n + 1
         else:
             self.counts[e, N_DROP_CONV] += 1
@@ -885,24 +933,40 @@ class FireSim:
     def _emit_radiation(self, e, c, step_key):
         n = self.counts[e, N_RAD]
         if n < self.rad_capacity:
-            cls = self.land[c]  # the mother class, never the burning state
-            h = rng.key(step_key, c, rng.DOMAIN_EMISSION + 16)
-            h2 = rng.mix32(h)
-            sf = self.cls_sf[cls]
-            lr = self.cls_lr[cls]
-            sf_sample = ti.abs(sf[0] + sf[1] * self.normals[rng.low16(h)])
-            length = lr[0] + (lr[1] - lr[0]) * rng.uniform(h2)
-            tau = 2703.0
-            if sf_sample > 0.00925:
-                tau = length / sf_sample
-            i = c // self.cols
-            j = c % self.cols
-            o1 = (i + rng.uniform(rng.mix32(h2))) * self.cell_size
-            o2 = (j + rng.uniform(rng.mix32(h2 + ti.u32(1)))) * self.cell_size
-            self.rad[e, n] = pt.new_radiation(o1, o2, self.rad_y_st, 1.0 - self.dt / tau, cls)
+            self.rad[e, n] = self.radiation_from(c, step_key)
             self.counts[e, N_RAD] = n + 1
         else:
             self.counts[e, N_DROP_RAD] += 1
+
+    @ti.func
+    def convection_from(self, c, step_key):
+        """A new convection particle of burning cell c (its draws are keyed by the cell, not its pool slot)."""
+        h = rng.key(step_key, c, rng.DOMAIN_EMISSION)
+        i = c // self.cols
+        j = c % self.cols
+        # The reference's particle constructor takes whole metres: the emission point is truncated.
+        x1 = ti.floor((i + rng.uniform(h)) * self.cell_size)
+        x2 = ti.floor((j + rng.uniform(rng.mix32(h))) * self.cell_size)
+        return ti.Vector([x1, x2, 0.0, 0.0, self.conv_y_st], ti.f32)
+
+    @ti.func
+    def radiation_from(self, c, step_key):
+        """A new radiation particle of burning cell c (keyed by the cell, as convection_from)."""
+        cls = self.land[c]  # the mother class, never the burning state
+        h = rng.key(step_key, c, rng.DOMAIN_EMISSION + 16)
+        h2 = rng.mix32(h)
+        sf = self.cls_sf[cls]
+        lr = self.cls_lr[cls]
+        sf_sample = ti.abs(sf[0] + sf[1] * self.normals[rng.low16(h)])
+        length = lr[0] + (lr[1] - lr[0]) * rng.uniform(h2)
+        tau = 2703.0
+        if sf_sample > 0.00925:
+            tau = length / sf_sample
+        i = c // self.cols
+        j = c % self.cols
+        o1 = (i + rng.uniform(rng.mix32(h2))) * self.cell_size
+        o2 = (j + rng.uniform(rng.mix32(h2 + ti.u32(1)))) * self.cell_size
+        return pt.new_radiation(o1, o2, self.rad_y_st, 1.0 - self.dt / tau, cls)
 
     # ------------------------------------------------------------------------------------------ water
 

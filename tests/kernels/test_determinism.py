@@ -67,9 +67,12 @@ SCRIPT = textwrap.dedent("""
     init_taichi("cpu", threads=int(sys.argv[1]))
     from roshan.config import FireConfig, IgnitionConfig
     from roshan.kernels.fire import FireSim
+    from roshan.kernels.fire_parallel import ChunkedStep
     from roshan.maps import load_map
-    sim = FireSim(load_map("21x21_Field"), FireConfig(layout=sys.argv[2]), ignition=IgnitionConfig(fire_percentage=0.2),
-                  num_envs=16, seed=3)
+    sim = FireSim(load_map("21x21_Field"), FireConfig(layout=sys.argv[2], parallel=sys.argv[3]),
+                  ignition=IgnitionConfig(fire_percentage=0.2), num_envs=16, seed=3)
+    if sim.parallel == "chunks":
+        sim.chunked = ChunkedStep(sim, min_chunk=8)  # many chunks on this small map
     sim.reset(); sim.step(2000)
     ints, timers = sim.cell_records()
     h = hashlib.sha256(ints.tobytes() + timers.tobytes() + sim.conv.to_numpy().tobytes()
@@ -78,9 +81,10 @@ SCRIPT = textwrap.dedent("""
 """)
 
 
-@pytest.mark.parametrize("layout", ["dense", "sparse"])
-def test_bit_identical_across_thread_counts(layout):
-    digests = [subprocess.run([sys.executable, "-c", SCRIPT, str(t), layout], capture_output=True, text=True,
-                              check=True).stdout.strip().splitlines()[-1] for t in (1, 2)]
+@pytest.mark.parametrize("layout,parallel", [("dense", "envs"), ("sparse", "envs"), ("dense", "chunks"),
+                                             ("sparse", "chunks")])
+def test_bit_identical_across_thread_counts(layout, parallel):
+    digests = [subprocess.run([sys.executable, "-c", SCRIPT, str(t), layout, parallel], capture_output=True,
+                              text=True, check=True).stdout.strip().splitlines()[-1] for t in (1, 2)]
     assert digests[0] == digests[1]
     assert len(digests[0]) == len(hashlib.sha256().hexdigest())

@@ -1,0 +1,98 @@
+"""The chunked update (one env's lists cut into chunks over threads) against the env-serial one: bit for bit."""
+
+import numpy as np
+import pytest
+
+from roshan.config import FireConfig, IgnitionConfig
+from roshan.kernels.fire import CHUNKS_MIN_FIRES, FireSim, choose_parallel
+from roshan.kernels.fire_parallel import ChunkedStep
+from roshan.kernels.fire_records import N_EXPOSED
+from roshan.maps import load_map
+
+ENVS = 3
+
+
+def run(parallel: str, pct: float = 0.05, **fire) -> FireSim:
+    """Fire, water on two burning cells and one unburned cell per env, a reset of env 1, more fire. The chunked
+    run cuts lists into chunks of 8 items, so even this small map's lists span many chunks."""
+    sim = FireSim(load_map("54x71_Woods"), FireConfig(parallel=parallel, **fire),
+                  ignition=IgnitionConfig(fire_percentage=pct, clusters=2), num_envs=ENVS, seed=11)
+    assert sim.parallel == parallel
+    if parallel == "chunks":
+        sim.chunked = ChunkedStep(sim, min_chunk=8)
+    sim.reset()
+    sim.step(4000)
+    burning, counts = sim.burning.to_numpy(), sim.stats()["burning"]
+    requests = np.full((ENVS, 3), -1, np.int32)
+    for e in range(ENVS):
+        requests[e, : min(2, counts[e])] = burning[e, : min(2, counts[e])]
+        requests[e, 2] = 7 * sim.cols + 3
+    extinguished = np.zeros_like(requests)
+    sim.flood(requests, extinguished)
+    assert extinguished.sum() >= 3, "the drops must hit burning cells"
+    sim.step(2000)
+    sim.reset(np.array([0, 1, 0], np.int32))
+    sim.step(1500)
+    return sim
+
+
+def assert_same_fire(a: FireSim, b: FireSim) -> None:
+    """Records, every statistic, the particles in pool order and the cell lists in list order."""
+    a_ints, a_timers = a.cell_records()
+    b_ints, b_timers = b.cell_records()
+    np.testing.assert_array_equal(a_ints, b_ints)
+    np.testing.assert_array_equal(a_timers[..., :4], b_timers[..., :4])  # the flood timer is read only while flooded
+    a_stats, b_stats = a.stats(), b.stats()
+    for name in a_stats:
+        np.testing.assert_array_equal(a_stats[name], b_stats[name], err_msg=name)
+    for e in range(ENVS):
+        for x, y in zip(a.particles(e), b.particles(e), strict=True):
+            np.testing.assert_array_equal(x, y)
+    for lst, stat in (("burning", "burning"), ("flooded", "flooded")):
+        a_list, b_list = getattr(a, lst).to_numpy(), getattr(b, lst).to_numpy()
+        for e in range(ENVS):
+            n = a_stats[stat][e]
+            np.testing.assert_array_equal(a_list[e, :n], b_list[e, :n], err_msg=f"{lst} order, env {e}")
+    exposed = a.counts.to_numpy()[:, N_EXPOSED]
+    np.testing.assert_array_equal(exposed, b.counts.to_numpy()[:, N_EXPOSED])
+    a_list, b_list = a.exposed.to_numpy(), b.exposed.to_numpy()
+    for e in range(ENVS):
+        np.testing.assert_array_equal(a_list[e, : exposed[e]], b_list[e, : exposed[e]], err_msg=f"exposed, env {e}")
+
+
+@pytest.mark.parametrize("layout", ["dense", "sparse"])
+@pytest.mark.parametrize("pct", [0.05, 0.35])
+def test_the_chunked_update_gives_the_serial_trajectory(layout, pct):
+    serial = run("envs", pct, layout=layout)
+    chunked = run("chunks", pct, layout=layout)
+    stats = chunked.stats()
+    assert np.any(chunked.lit_counts() > stats["initial_fires"]), "the fire must spread (exposure, ignition)"
+    assert stats["convection"].sum() > 0 and stats["radiation"].sum() > 0
+    assert_same_fire(serial, chunked)
+
+
+def test_full_pools_drop_the_same_emissions_and_blocks():
+    """Pools too small for the fire: the chunked update drops exactly what the serial one drops."""
+    small = {"layout": "sparse", "block_capacity": 12, "conv_capacity": 24, "rad_capacity": 24}
+    serial = run("envs", 0.05, **small)
+    chunked = run("chunks", 0.05, **small)
+    stats = serial.stats()
+    assert stats["dropped_convection"].sum() > 0 and stats["dropped_radiation"].sum() > 0
+    assert stats["dropped_blocks"].sum() > 0
+    assert_same_fire(serial, chunked)
+
+
+def test_auto_chunks_only_huge_fires_with_idle_threads():
+    assert choose_parallel("auto", 1, CHUNKS_MIN_FIRES, threads=2) == "chunks"
+    assert choose_parallel("auto", 1, CHUNKS_MIN_FIRES - 1, threads=2) == "envs"
+    assert choose_parallel("auto", 2, CHUNKS_MIN_FIRES, threads=2) == "envs"  # every thread has an env
+    assert choose_parallel("auto", 1, CHUNKS_MIN_FIRES, threads=1) == "envs"
+    assert choose_parallel("chunks", 64, 10, threads=1) == "chunks"
+
+
+def test_the_chunked_scratch_is_one_env_whatever_the_batch():
+    land = load_map("54x71_Woods")
+    one = FireSim(land, FireConfig(parallel="chunks"), num_envs=1)
+    four = FireSim(land, FireConfig(parallel="chunks"), num_envs=4)
+    assert one.chunked.memory_bytes() == four.chunked.memory_bytes() > 0
+    assert FireSim(land, FireConfig(parallel="envs"), num_envs=1).chunked is None
