@@ -38,3 +38,23 @@ def sim_with_fires(map_name: str, burning: list[tuple], num_envs: int = 1, seed:
         mask[index] = 1
     s.ignite_cells(mask.reshape(num_envs, -1))
     return s
+
+
+def water_and_a_reset(sim, steps: tuple[int, int, int]) -> None:
+    """Reset and run ``steps[0]`` updates; drop water on two burning cells and one fixed cell per env; run
+    ``steps[1]``; reset env 1 alone; run ``steps[2]``: the events whose order a fire trajectory depends on."""
+    sim.reset()
+    sim.step(steps[0])
+    burning, counts = sim.burning.to_numpy(), sim.stats()["burning"]
+    requests = np.full((sim.num_envs, 3), -1, np.int32)
+    for e in range(sim.num_envs):
+        requests[e, : min(2, counts[e])] = burning[e, : min(2, counts[e])]
+        requests[e, 2] = 7 * sim.cols + 3
+    extinguished = np.zeros_like(requests)
+    sim.flood(requests, extinguished)
+    assert extinguished.sum() >= 3, "the drops must hit burning cells"
+    sim.step(steps[1])
+    reset = np.zeros(sim.num_envs, np.int32)
+    reset[1] = 1
+    sim.reset(reset)
+    sim.step(steps[2])

@@ -137,9 +137,9 @@ def choose_layout(layout: str, num_cells: int, block_capacity: int, num_envs: in
 
 
 # auto: the chunked update only where an env lights this many fires at its reset. Measured on this 2-core VM
-# (BENCHMARKS "A parallel path inside one env"): 2 threads give 1.31x the env-serial update with 329k fires
-# (941k-cell map, 35 %), and are slower with 128k (Borkenberge, 35 %) or at 1.5 %, where Taichi's ~30 us per
-# parallel task and ~100 us per kernel launch outweigh a 60-150 us update.
+# (BENCHMARKS "A parallel path inside one env"): 2 threads give 1.49x the env-serial update with 329k fires
+# (941k-cell map, 35 %), tie with it at 128k (Borkenberge, 35 %) and are 2.6-4x slower at 1.5 %, where Taichi's
+# ~30 us per parallel task and ~100 us per kernel launch outweigh a 90-190 us update.
 CHUNKS_MIN_FIRES = 250_000
 
 

@@ -13,6 +13,7 @@ from roshan.kernels.fire import (
     dense_bytes_per_env,
 )
 from roshan.maps import BURNING, load_map
+from tests.conftest import water_and_a_reset
 
 DYNAMIC_STATS = ("burning", "burned", "convection", "radiation", "dropped_convection", "dropped_radiation",
                  "flooded", "extinguished", "initial_fires")
@@ -22,20 +23,7 @@ def run_with_water_and_a_reset(layout: str, pattern: str, **fire) -> FireSim:
     """Fire, water on two burning cells and one unburned cell per env, a reset of env 1, more fire."""
     sim = FireSim(load_map("54x71_Woods"), FireConfig(layout=layout, **fire),
                   ignition=IgnitionConfig(fire_percentage=0.05, pattern=pattern, clusters=2), num_envs=3, seed=11)
-    sim.reset()
-    sim.step(1200)
-    burning = sim.burning.to_numpy()
-    counts = sim.stats()["burning"]
-    requests = np.full((3, 3), -1, np.int32)
-    for e in range(3):
-        requests[e, : min(2, counts[e])] = burning[e, : min(2, counts[e])]
-        requests[e, 2] = 7 * sim.cols + 3
-    extinguished = np.zeros_like(requests)
-    sim.flood(requests, extinguished)
-    assert extinguished.sum() >= 3, "the drops must hit burning cells"
-    sim.step(800)
-    sim.reset(np.array([0, 1, 0], np.int32))
-    sim.step(600)
+    water_and_a_reset(sim, (1200, 800, 600))
     return sim
 
 

@@ -8,6 +8,7 @@ from roshan.kernels.fire import CHUNKS_MIN_FIRES, FireSim, choose_parallel
 from roshan.kernels.fire_parallel import ChunkedStep
 from roshan.kernels.fire_records import N_EXPOSED
 from roshan.maps import load_map
+from tests.conftest import water_and_a_reset
 
 ENVS = 3
 
@@ -20,19 +21,7 @@ def run(parallel: str, pct: float = 0.05, **fire) -> FireSim:
     assert sim.parallel == parallel
     if parallel == "chunks":
         sim.chunked = ChunkedStep(sim, min_chunk=8)
-    sim.reset()
-    sim.step(4000)
-    burning, counts = sim.burning.to_numpy(), sim.stats()["burning"]
-    requests = np.full((ENVS, 3), -1, np.int32)
-    for e in range(ENVS):
-        requests[e, : min(2, counts[e])] = burning[e, : min(2, counts[e])]
-        requests[e, 2] = 7 * sim.cols + 3
-    extinguished = np.zeros_like(requests)
-    sim.flood(requests, extinguished)
-    assert extinguished.sum() >= 3, "the drops must hit burning cells"
-    sim.step(2000)
-    sim.reset(np.array([0, 1, 0], np.int32))
-    sim.step(1500)
+    water_and_a_reset(sim, (4000, 2000, 1500))
     return sim
 
 
