@@ -430,11 +430,15 @@ BUDGET = click.option("--budget", type=click.Choice(["local", "thesis"]), defaul
               help="Retries of a run whose worker died (each continues from its latest checkpoint).")
 @click.option("--heartbeat", type=click.IntRange(min=1), default=60, show_default=True,
               help="Seconds between a running run's heartbeats; stale after 5 missed ones.")
+@click.option("--only", multiple=True, metavar="CONDITION",
+              help="Run only these conditions (names or shell patterns such as 'E2_*'; repeat for more); the "
+                   "others stay queued for a later call or another machine.")
 @click.option("--worker", is_flag=True, hidden=True)
 @click.option("--slot", type=click.IntRange(min=0), default=0, hidden=True)
 @ARCH
 @THREADS
-def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbeat, worker, slot, arch, threads):
+def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbeat, only, worker, slot, arch,
+                   threads):
     """Train and evaluate every (condition, seed) of SPEC; run it again to continue after a crash (finished runs
     are kept, a killed one continues from its checkpoint); machines sharing --storage split the runs."""
     from roshan.experiment.runner import default_storage, run_experiment, run_worker
@@ -443,12 +447,13 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
 
     try:
         spec = load_spec(spec_path, budget)
+        chosen = spec.select(only)
         extra = tuple(f"{k}={v}" for k, v in local_values(arch, threads).items())
         if worker:
             url = storage or default_storage(root, spec.name)
-            sys.exit(run_worker(spec, url, root, heartbeat=heartbeat, max_retry=max_retry, extra=extra))
+            sys.exit(run_worker(spec, url, root, heartbeat=heartbeat, max_retry=max_retry, extra=extra, only=chosen))
         args = (["--arch", arch] if arch else []) + (["--threads", str(threads)] if threads else [])
-        run_experiment(spec, root, storage, workers, args, heartbeat, max_retry, echo=click.echo)
+        run_experiment(spec, root, storage, workers, args, heartbeat, max_retry, echo=click.echo, only=chosen)
     except (ConfigError, MapError, ValueError, OSError) as exc:
         _fail(exc)
     click.echo(f"report: roshan experiment report {spec_path}" + (f" --budget {budget}" if budget != "local" else "")

@@ -179,14 +179,16 @@ Execute = Callable[[Run, Path], dict]
 
 
 def run_worker(spec: Spec, storage_url: str, root: str | Path, execute: Execute | None = None,
-               heartbeat: int | None = 60, max_retry: int | None = 3, extra: tuple[str, ...] = ()) -> int:
-    """Claim one run of ``spec``'s experiment, execute it and record its result; returns the exit code (0, or
-    130 when interrupted: the run is failed and queued again, and continues from its checkpoint)."""
+               heartbeat: int | None = 60, max_retry: int | None = 3, extra: tuple[str, ...] = (),
+               only: tuple[str, ...] = ()) -> int:
+    """Claim one run of ``spec``'s experiment (of the conditions ``only`` names, when given), execute it and
+    record its result; returns the exit code (0, or 130 when interrupted: the run is failed and queued again, and
+    continues from its checkpoint)."""
     storage = open_storage(storage_url, heartbeat, max_retry)
     study = load_experiment(storage, spec.name)
     check_runs(spec, study.user_attrs[STUDY_ATTR], study)
     fail_stale(study)
-    runs = {r.key: r for r in spec.runs()}
+    runs = {r.key: r for r in spec.runs(only)}
     got = claim(study, {k: i for i, k in enumerate(runs)})
     if got is None:
         return 0
@@ -309,10 +311,11 @@ class ExperimentLauncher(Launcher):
     """Keeps ``workers`` worker processes (one run each) busy while runs are waiting."""
 
     def __init__(self, spec: Spec, storage_url: str, root: str | Path, workers: int, worker_args: list[str],
-                 echo: Callable[[str], None] = print, poll: float = 1.0):
-        super().__init__(storage_url, spec.name, root, workers, worker_args, echo, poll)
+                 echo: Callable[[str], None] = print, poll: float = 1.0, only: tuple[str, ...] = ()):
+        super().__init__(storage_url, spec.name, root, workers, worker_args + [a for n in only for a in ("--only", n)],
+                         echo, poll)
         self.spec = spec
-        self.keys = {r.key for r in spec.runs()}
+        self.keys = {r.key for r in spec.runs(only)}
 
     def continue_hint(self) -> str:
         return f"roshan experiment run {self.spec.path} --root {self.root}" + (
@@ -356,20 +359,24 @@ class ExperimentLauncher(Launcher):
 
 def run_experiment(spec: Spec, root: str | Path = "runs", storage: str | None = None, workers: int = 1,
                    worker_args: list[str] | tuple = (), heartbeat: int | None = 60, max_retry: int | None = 3,
-                   echo: Callable[[str], None] = print, poll: float = 1.0) -> optuna.Study:
+                   echo: Callable[[str], None] = print, poll: float = 1.0, only: tuple[str, ...] = ()
+                   ) -> optuna.Study:
     """``roshan experiment run``: create or continue the experiment and run its waiting runs with ``workers``
-    processes on this machine; returns the study."""
+    processes on this machine (only the runs of the conditions ``only`` names, when given: the whole spec is
+    still created, so other runs keep their place for a later call); returns the study."""
     url = storage or default_storage(root, spec.name)
     store = open_storage(url, heartbeat, max_retry, repair=True, echo=echo)
     study = prepare_experiment(store, spec, echo)
-    keys = {r.key for r in spec.runs()}
+    keys = {r.key for r in spec.runs(only)}
     p = progress(study, keys)
     total = len(keys)
-    echo(f"experiment {spec.name}: {p['done']}/{total} runs done, {p['waiting']} waiting, {workers} worker(s), "
-         f"storage {display_url(url)}")
-    launcher = ExperimentLauncher(spec, url, root, workers, list(worker_args), echo, poll)
+    chosen = f" of {', '.join(only)}" if only else ""
+    echo(f"experiment {spec.name}: {p['done']}/{total} runs{chosen} done, {p['waiting']} waiting, {workers} "
+         f"worker(s), storage {display_url(url)}")
+    launcher = ExperimentLauncher(spec, url, root, workers, list(worker_args), echo, poll, only)
     launcher.reported = {t.number for t in study.get_trials(deepcopy=False) if t.state.is_finished()}
     launcher.run(study, spec)
     p = progress(study, keys)
-    echo(f"experiment {spec.name}: {p['done']}/{total} runs done" + (f", {p['failed']} failed" if p["failed"] else ""))
+    echo(f"experiment {spec.name}: {p['done']}/{total} runs{chosen} done"
+         + (f", {p['failed']} failed" if p["failed"] else ""))
     return study

@@ -27,6 +27,7 @@ Runs are queued in the spec's order (conditions, then seeds), so list what matte
 
 from __future__ import annotations
 
+import fnmatch
 import hashlib
 import json
 import re
@@ -125,6 +126,15 @@ class Spec:
     def runs(self, only: tuple[str, ...] = ()) -> list[Run]:
         """Every (condition, seed), in the spec's order: conditions first, then seeds."""
         return [Run(c, s) for c in self.conditions if not only or c.name in only for s in c.seeds]
+
+    def select(self, patterns: tuple[str, ...]) -> tuple[str, ...]:
+        """The names of the conditions that match any of ``patterns`` (names or shell patterns such as ``E2_*``),
+        in the spec's order; () for no patterns (every condition). A pattern that matches nothing is an error."""
+        names = [c.name for c in self.conditions]
+        for p in patterns:
+            if not fnmatch.filter(names, p):
+                raise SpecError(f"{self.path}: --only {p!r} matches no condition; it has {', '.join(names)}")
+        return tuple(n for n in names if any(fnmatch.fnmatchcase(n, p) for p in patterns))
 
     def condition(self, name: str) -> Condition:
         for c in self.conditions:

@@ -195,6 +195,21 @@ def test_a_spec_may_grow_but_not_change_a_started_run(tmp_path):
     start(spec_path, tmp_path)  # greedy has not started: it may change
 
 
+def test_only_runs_the_chosen_conditions_and_leaves_the_rest_queued(tmp_path):
+    spec, url, study = start(write_spec(tmp_path), tmp_path)
+    assert spec.select(("more_*", "greedy")) == ("more_seeds", "greedy")
+    assert spec.select(()) == ()
+    with pytest.raises(SpecError, match=r"--only 'E2_\*' matches no condition; it has fast, more_seeds, greedy"):
+        spec.select(("E2_*",))
+    log = tmp_path / "log"
+    for _ in range(4):  # one more call than there are chosen runs: it finds none and returns
+        assert run_worker(spec, url, tmp_path, execute=recording_execute(log), only=("more_seeds",)) == 0
+    assert lines(log, "done") == ["more_seeds/seed_5", "more_seeds/seed_7", "more_seeds/seed_11"]
+    assert progress(study) == {"done": 3, "running": 0, "waiting": 3, "failed": 0}
+    run_worker(spec, url, tmp_path, execute=recording_execute(log))  # without --only: the spec's order again
+    assert lines(log, "done")[-1] == "fast/seed_0"
+
+
 # ------------------------------------------------------------------------------------------ the report
 
 
