@@ -58,3 +58,27 @@ def water_and_a_reset(sim, steps: tuple[int, int, int]) -> None:
     reset[1] = 1
     sim.reset(reset)
     sim.step(steps[2])
+
+
+def assert_same_fire(a, b, stats=None) -> None:
+    """Two simulators hold the same fire: cell records, the statistics named in ``stats`` (default all), the
+    particles in pool order and the burning, flooded and exposed lists in list order."""
+    from roshan.kernels.fire_records import N_EXPOSED
+
+    a_ints, a_timers = a.cell_records()
+    b_ints, b_timers = b.cell_records()
+    np.testing.assert_array_equal(a_ints, b_ints)
+    np.testing.assert_array_equal(a_timers[..., :4], b_timers[..., :4])  # the flood timer is read only while flooded
+    a_stats, b_stats = a.stats(), b.stats()
+    for name in stats or a_stats:
+        np.testing.assert_array_equal(a_stats[name], b_stats[name], err_msg=name)
+    for e in range(a.num_envs):
+        for x, y in zip(a.particles(e), b.particles(e), strict=True):
+            np.testing.assert_array_equal(x, y)
+    exposed = a.counts.to_numpy()[:, N_EXPOSED]
+    np.testing.assert_array_equal(exposed, b.counts.to_numpy()[:, N_EXPOSED])
+    lengths = {"burning": a_stats["burning"], "flooded": a_stats["flooded"], "exposed": exposed}
+    for lst, n in lengths.items():
+        a_list, b_list = getattr(a, lst).to_numpy(), getattr(b, lst).to_numpy()
+        for e in range(a.num_envs):
+            np.testing.assert_array_equal(a_list[e, : n[e]], b_list[e, : n[e]], err_msg=f"{lst} order, env {e}")

@@ -6,9 +6,8 @@ import pytest
 from roshan.config import FireConfig, IgnitionConfig
 from roshan.kernels.fire import CHUNKS_MIN_FIRES, FireSim, choose_parallel
 from roshan.kernels.fire_parallel import ChunkedStep
-from roshan.kernels.fire_records import N_EXPOSED
 from roshan.maps import load_map
-from tests.conftest import water_and_a_reset
+from tests.conftest import assert_same_fire, water_and_a_reset
 
 ENVS = 3
 
@@ -23,30 +22,6 @@ def run(parallel: str, pct: float = 0.05, **fire) -> FireSim:
         sim.chunked = ChunkedStep(sim, min_chunk=8)
     water_and_a_reset(sim, (4000, 2000, 1500))
     return sim
-
-
-def assert_same_fire(a: FireSim, b: FireSim) -> None:
-    """Records, every statistic, the particles in pool order and the cell lists in list order."""
-    a_ints, a_timers = a.cell_records()
-    b_ints, b_timers = b.cell_records()
-    np.testing.assert_array_equal(a_ints, b_ints)
-    np.testing.assert_array_equal(a_timers[..., :4], b_timers[..., :4])  # the flood timer is read only while flooded
-    a_stats, b_stats = a.stats(), b.stats()
-    for name in a_stats:
-        np.testing.assert_array_equal(a_stats[name], b_stats[name], err_msg=name)
-    for e in range(ENVS):
-        for x, y in zip(a.particles(e), b.particles(e), strict=True):
-            np.testing.assert_array_equal(x, y)
-    for lst, stat in (("burning", "burning"), ("flooded", "flooded")):
-        a_list, b_list = getattr(a, lst).to_numpy(), getattr(b, lst).to_numpy()
-        for e in range(ENVS):
-            n = a_stats[stat][e]
-            np.testing.assert_array_equal(a_list[e, :n], b_list[e, :n], err_msg=f"{lst} order, env {e}")
-    exposed = a.counts.to_numpy()[:, N_EXPOSED]
-    np.testing.assert_array_equal(exposed, b.counts.to_numpy()[:, N_EXPOSED])
-    a_list, b_list = a.exposed.to_numpy(), b.exposed.to_numpy()
-    for e in range(ENVS):
-        np.testing.assert_array_equal(a_list[e, : exposed[e]], b_list[e, : exposed[e]], err_msg=f"exposed, env {e}")
 
 
 @pytest.mark.parametrize("layout", ["dense", "sparse"])
