@@ -83,11 +83,15 @@ def minibatch_loss(cfg, new_logp: torch.Tensor, old_logp: torch.Tensor, entropy:
     return actor_loss - cfg.entropy_coeff * entropy + cfg.value_loss_coef * value_loss
 
 
-def clip_gradients(groups: dict, max_norm: float) -> None:
-    """Gradient-norm clipping per parameter group (actor, critic, encoders), as the reference does."""
-    if max_norm > 0:
-        for params in groups.values():
-            nn.utils.clip_grad_norm_(params, max_norm)
+def clip_gradients(groups: dict, max_norm: float) -> dict[str, torch.Tensor]:
+    """Gradient-norm clipping per parameter group (actor, critic), as the reference does; returns each group's
+    norm before clipping (also with clipping off, so the logs show what a bound would cut)."""
+    norms = {}
+    for name, params in groups.items():
+        norms[name] = nn.utils.get_total_norm([p.grad for p in params if p.grad is not None])
+        if max_norm > 0:
+            nn.utils.clip_grads_with_norm_(params, max_norm, norms[name])
+    return norms
 
 
 def explained_variance(values: torch.Tensor, returns: torch.Tensor) -> float:
@@ -206,7 +210,7 @@ class PPO:
         """Gradient steps over the minibatches of every epoch; the KL early stop abandons the rest of an epoch
         (later epochs still start)."""
         stats: dict[str, list[float]] = {k: [] for k in ("actor_loss", "value_loss", "entropy", "approx_kl",
-                                                          "clip_fraction")}
+                                                          "clip_fraction", *(f"grad_norm_{g}" for g in self.groups))}
         self.net.train()
         for epoch in epochs:
             for minibatch in epoch:
@@ -265,7 +269,8 @@ class PPO:
         for o in self.optimizers:
             o.zero_grad(set_to_none=True)
         loss.backward()
-        clip_gradients(self.groups, self.cfg.max_grad_norm)
+        for name, norm in clip_gradients(self.groups, self.cfg.max_grad_norm).items():
+            stats[f"grad_norm_{name}"].append(float(norm))
         for o, s in zip(self.optimizers, self.schedulers, strict=True):
             o.step()
             s.step()

@@ -399,6 +399,7 @@ class Trainer:
                 "Training/actor_loss": "actor_loss", "Training/value_loss": "value_loss",
                 "Training/entropy_loss": "entropy", "Training/log_std": "std", "Training/LR": "lr",
                 "Training/saturated": "saturated", "Training/mean_excess": "mean_excess",
+                "Training/grad_norm_actor": "grad_norm_actor", "Training/grad_norm_critic": "grad_norm_critic",
                 "Sanitylogs/Explained_Variance": "explained_variance", "Perf/steps_per_s": "steps_per_s"}
         for tag, key in tags.items():
             if key in m and m[key] == m[key]:

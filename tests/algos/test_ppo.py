@@ -9,7 +9,7 @@ from roshan.algos.agents import fly_ppo
 from roshan.algos.distributions import ClippedGaussian, TanhNormal
 from roshan.algos.frames import FrameCache
 from roshan.algos.normalize import RewardScaler
-from roshan.algos.ppo import PPO, Rollout, approx_kl, clipped_surrogate, explained_variance
+from roshan.algos.ppo import PPO, Rollout, approx_kl, clip_gradients, clipped_surrogate, explained_variance
 from roshan.config import PPOConfig, RNDConfig
 
 
@@ -137,6 +137,24 @@ def test_gradient_clipping_bounds_each_group():
     moved = torch.cat([(dict(agent.net.named_parameters())[n].detach() - before[n]).flatten() for n in actor])
     # plain SGD with lr 1: the step is the clipped gradient, so its norm is at most the clip
     assert float(moved.norm()) <= 1e-3 * (1 + 1e-4)
+
+
+@pytest.mark.parametrize("max_norm", [0.0, 0.5])
+def test_clip_gradients_reports_each_groups_norm_before_clipping(max_norm):
+    a, b, c = (torch.nn.Parameter(torch.zeros(2)) for _ in range(3))
+    a.grad, b.grad, c.grad = torch.tensor([3.0, 0.0]), torch.tensor([0.0, 4.0]), torch.tensor([0.1, 0.0])
+    norms = clip_gradients({"actor": [a, b], "critic": [c]}, max_norm)
+    assert {k: float(v) for k, v in norms.items()} == pytest.approx({"actor": 5.0, "critic": 0.1})
+    scale = max_norm / (5.0 + 1e-6) if max_norm else 1.0  # torch's clip coefficient; 0 = clipping off
+    assert a.grad.tolist() == pytest.approx([3.0 * scale, 0.0]) and b.grad.tolist() == pytest.approx([0.0, 4.0 * scale])
+    assert c.grad.tolist() == pytest.approx([0.1, 0.0])  # under the bound: untouched
+
+
+def test_update_logs_the_gradient_norm_of_each_group():
+    g = torch.Generator().manual_seed(0)
+    agent = fly_ppo(PPOConfig(horizon=64, batch_size=32, k_epochs=1), collision=False)
+    stats = agent.update(bandit_rollout(agent, 1, 64, g), g)
+    assert stats["grad_norm_actor"] > 0 and stats["grad_norm_critic"] > 0
 
 
 def test_separate_optimizers_refuse_a_shared_encoder():
