@@ -119,9 +119,9 @@ class ChunkedStep:
                 q = v // TASK
                 nc, nr = self.plan[CONV, PLAN_COUNT], self.plan[RAD, PLAN_COUNT]
                 if q < nc:
-                    self._place_convection(e, q)
+                    self._place_kept(e, CONV, q, self.conv, self.sim.conv)
                 elif q < nc + nr:
-                    self._place_radiation(e, q - nc)
+                    self._place_kept(e, RAD, q - nc, self.rad, self.sim.rad)
                 else:
                     self._expose(e, q - nc - nr)
         ti.loop_config(serialize=True)  # a serial task: no thread-pool dispatch (~30 us here)
@@ -132,7 +132,7 @@ class ChunkedStep:
             if v % TASK == 0:
                 q = v // TASK
                 if q < self.plan[EXPOSED, PLAN_COUNT]:
-                    self._place_exposed(e, q)
+                    self._place_kept(e, EXPOSED, q, self.kept, self.sim.exposed)
                 else:
                     self._burn(e, q - self.plan[EXPOSED, PLAN_COUNT])
         ti.loop_config(serialize=True)  # a serial task: no thread-pool dispatch (~30 us here)
@@ -243,18 +243,13 @@ class ChunkedStep:
                 self.sim._visit(e, self.queue[lo + k], t)
 
     @ti.func
-    def _place_convection(self, e, q):
-        lo = q * self.plan[CONV, PLAN_SIZE]
-        out = self.first[CONV * MAX_CHUNKS + q, F_OUT]
-        for k in range(self.chunk[CONV * MAX_CHUNKS + q, K_KEPT]):
-            self.sim.conv[e, out + k] = self.conv[lo + k]
-
-    @ti.func
-    def _place_radiation(self, e, q):
-        lo = q * self.plan[RAD, PLAN_SIZE]
-        out = self.first[RAD * MAX_CHUNKS + q, F_OUT]
-        for k in range(self.chunk[RAD * MAX_CHUNKS + q, K_KEPT]):
-            self.sim.rad[e, out + k] = self.rad[lo + k]
+    def _place_kept(self, e, lst: ti.template(), q, scratch: ti.template(), dest: ti.template()):
+        """Chunk q's kept entries of list ``lst``, from their scratch span to their place in the env's list (the
+        offsets give each chunk its first slot, so the kept entries stay in list order)."""
+        lo = q * self.plan[lst, PLAN_SIZE]
+        out = self.first[lst * MAX_CHUNKS + q, F_OUT]
+        for k in range(self.chunk[lst * MAX_CHUNKS + q, K_KEPT]):
+            dest[e, out + k] = scratch[lo + k]
 
     # ------------------------------------------------------------------------------------------ cells
 
@@ -300,13 +295,6 @@ class ChunkedStep:
                 n += 1
             self.sim.counts[e, N_LIT] += self.chunk[row, K_LIT]
         self.sim.counts[e, N_BURNING] = n
-
-    @ti.func
-    def _place_exposed(self, e, q):
-        lo = q * self.plan[EXPOSED, PLAN_SIZE]
-        out = self.first[EXPOSED * MAX_CHUNKS + q, F_OUT]
-        for k in range(self.chunk[EXPOSED * MAX_CHUNKS + q, K_KEPT]):
-            self.sim.exposed[e, out + k] = self.kept[lo + k]
 
     @ti.func
     def _burn(self, e, q):
@@ -361,9 +349,7 @@ class ChunkedStep:
         step_key = self.step_key[None]
         row = BURNING * MAX_CHUNKS + q
         lo = q * self.plan[BURNING, PLAN_SIZE]
-        out = self.first[row, F_OUT]
-        for k in range(self.chunk[row, K_KEPT]):
-            self.sim.burning[e, out + k] = self.fresh[lo + k]
+        self._place_kept(e, BURNING, q, self.fresh, self.sim.burning)
         conv = self.first[row, F_CONV]
         rad = self.first[row, F_RAD]
         for k in range(self.chunk[row, K_QUEUED]):
