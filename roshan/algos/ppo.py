@@ -7,6 +7,7 @@ per env, so an episode that ends because of one drone ends every drone's trace: 
 flags, learning.md 6.2 step 5 calls that a quirk), or a planner network, whose rows are envs (B = envs).
 """
 
+import copy
 from collections.abc import Callable, Iterator
 from functools import partial
 from typing import NamedTuple
@@ -100,6 +101,29 @@ def explained_variance(values: torch.Tensor, returns: torch.Tensor) -> float:
     return float("nan") if float(var) == 0.0 else float(1.0 - (returns - values).var() / var)
 
 
+class WeightAverage:
+    """An exponential moving average of a policy's network, stepped once per update, and a copy of the policy
+    that acts with it. The deterministic policy is what gets evaluated and shipped; in the collision setting its
+    success moves by several points between neighbouring updates even at a small rate (BENCHMARKS, "E6"), and an
+    average over the last ~1 / (1 - decay) updates is a point that no single minibatch step chose."""
+
+    def __init__(self, policy: Policy, decay: float):
+        self.decay = decay
+        self.policy = copy.copy(policy)  # the same distribution and settings, acting through its own network
+        self.policy.net = copy.deepcopy(policy.net).requires_grad_(False)
+
+    @staticmethod
+    def _floats(net: nn.Module) -> list[torch.Tensor]:
+        return [t for t in net.state_dict().values() if t.is_floating_point()]
+
+    @torch.no_grad()
+    def update(self, net: nn.Module) -> None:
+        torch._foreach_lerp_(self._floats(self.policy.net), self._floats(net), 1.0 - self.decay)
+
+    def reset(self, net: nn.Module) -> None:
+        self.policy.net.load_state_dict(net.state_dict())
+
+
 class PPO:
     """A policy and its PPO update: optimisers, schedules, the reward scaler, GAE and the minibatch epochs."""
 
@@ -126,6 +150,7 @@ class PPO:
         self.scaler = RewardScaler(cfg.reward_eps)
         # built after the networks, so that with RND off the parameter initialisation draws stay as they were
         self.rnd = RND(policy.novelty_dim, rnd, self.device) if rnd is not None and rnd.enabled else None
+        self.average = WeightAverage(policy, cfg.ema_decay) if cfg.ema_decay > 0 else None
         self.updates = 0
         self.gradient_steps = 0
 
@@ -138,8 +163,9 @@ class PPO:
 
     @torch.no_grad()
     def act_deterministic(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
-        """The policy's deterministic actions (the distribution's mode; planner: per-drone argmax)."""
-        return self.policy.act_deterministic(obs)
+        """The policy's deterministic actions (the distribution's mode; planner: per-drone argmax), with the
+        averaged weights where ``ppo.ema_decay`` > 0."""
+        return (self.policy if self.average is None else self.average.policy).act_deterministic(obs)
 
     @torch.no_grad()
     def sample(self, obs: dict[str, torch.Tensor], generator: torch.Generator | None = None,
@@ -187,6 +213,8 @@ class PPO:
         rewards, adv, ret = self.advantages(rollout, intrinsic.pop("rewards", None))
         minibatches = self._sequence_minibatches if cfg.minibatch == "sequences" else self._sample_minibatches
         stats = self._epochs(minibatches(rollout, adv, ret, generator))
+        if self.average is not None:
+            self.average.update(self.net)
         self.updates += 1
         out = {k: (sum(v) / len(v) if v else float("nan")) for k, v in stats.items()}
         out.update(rewards_raw=float(rollout.rewards.mean()), rewards_scaled=float(rewards.mean()),
@@ -285,12 +313,23 @@ class PPO:
                  "updates": self.updates, "gradient_steps": self.gradient_steps}
         if self.rnd is not None:
             state["rnd"] = self.rnd.state_dict()
+        if self.average is not None:
+            state["net_average"] = self.average.policy.net.state_dict()
         return state
 
     def load_state_dict(self, state: dict, weights_only: bool = False) -> None:
-        self.net.load_state_dict(state["net"])
+        """``weights_only`` (evaluation, fine-tuning) loads the weights that act deterministically: the average
+        where the checkpoint has one."""
         if weights_only:
+            self.net.load_state_dict(state.get("net_average", state["net"]))
+            if self.average is not None:
+                self.average.reset(self.net)
             return
+        self.net.load_state_dict(state["net"])
+        if self.average is not None:
+            if "net_average" not in state:
+                raise ValueError("ppo.ema_decay > 0, but this checkpoint was saved without the weight average")
+            self.average.policy.net.load_state_dict(state["net_average"])
         if self.rnd is not None:
             if "rnd" not in state:
                 raise ValueError("rnd.enabled = true, but this checkpoint was saved without RND")

@@ -85,6 +85,10 @@ class PPOConfig(Section):
                                           "(the reference)")
     mean_bound_coef: float = num(1.0, 0.0, doc="weight of the mean_bound penalty in the PPO loss")
     separate_optimizers: bool = False
+    ema_decay: float = num(0.0, 0.0, 1.0, hi_open=True,
+                           doc="> 0: deterministic actions (evaluation, best_eval, the saved policy) come from an "
+                               "exponential moving average of the weights, decayed by this factor once per update "
+                               "(0.9: about the last 10 updates); training samples with the live weights; 0 = off")
     reward_eps: float = num(1e-8, 0.0, doc="added to the running variance (thesis-era 1e-8, newest 1e-4)")
     bootstrap_truncated: bool = True  # False: a timeout ends the trace like a terminal (the reference)
     minibatch: str = choice("samples", ("samples", "sequences"),

@@ -283,3 +283,53 @@ def test_mean_bound_penalty_is_the_squared_excess_once():
     off = fly_ppo(PPOConfig(use_tanh_dist=False, mean_bound=3.0), collision=False)
     off.policy.evaluate(obs, torch.zeros(6, 2))
     assert off.policy.penalty() == 0.0  # the Gaussian's mean is tanh(mu) already
+
+
+def floats(net: torch.nn.Module) -> dict[str, torch.Tensor]:
+    return {k: v.detach().clone() for k, v in net.state_dict().items() if v.is_floating_point()}
+
+
+def test_weight_average_is_the_exponential_average_over_updates_and_acts_deterministically():
+    g = torch.Generator().manual_seed(0)
+    d = 0.75
+    agent = fly_ppo(PPOConfig(horizon=64, batch_size=32, lr=1e-2, ema_decay=d), collision=True)
+    w = [floats(agent.net)]
+    for _ in range(2):
+        agent.update(bandit_rollout(agent, 1, 64, g), g)
+        w.append(floats(agent.net))
+    # avg_0 = w_0, avg_k = d avg_(k-1) + (1 - d) w_k (learning one step per update, not per minibatch)
+    want = {k: d * (d * w[0][k] + (1 - d) * w[1][k]) + (1 - d) * w[2][k] for k in w[0]}
+    got = floats(agent.average.policy.net)
+    for k in want:
+        torch.testing.assert_close(got[k], want[k], rtol=1e-6, atol=1e-7)
+    assert not torch.equal(got["mu.weight"], w[2]["mu.weight"])  # the live weights moved on
+    obs = bandit_obs(16, torch.rand(16, 2, generator=g) * 2 - 1)
+    live = fly_ppo(PPOConfig(horizon=64, batch_size=32), collision=True)
+    live.net.load_state_dict(agent.net.state_dict())
+    averaged = fly_ppo(PPOConfig(horizon=64, batch_size=32), collision=True)
+    averaged.net.load_state_dict(agent.average.policy.net.state_dict())
+    torch.testing.assert_close(agent.act_deterministic(obs), averaged.act_deterministic(obs), rtol=0, atol=0)
+    assert not torch.equal(agent.act_deterministic(obs), live.act_deterministic(obs))
+    # training keeps sampling from the live weights
+    torch.testing.assert_close(agent.policy.net(obs)[0], live.net(obs)[0], rtol=0, atol=0)
+
+
+def test_weight_average_survives_resume_and_is_what_a_weights_only_load_acts_with():
+    g = torch.Generator().manual_seed(0)
+    cfg = PPOConfig(horizon=64, batch_size=32, lr=1e-2, ema_decay=0.9)
+    a = fly_ppo(cfg, collision=True)
+    a.update(bandit_rollout(a, 1, 64, g), g)
+    state = a.state_dict()
+    obs = bandit_obs(16, torch.rand(16, 2, generator=g) * 2 - 1)
+    resumed = fly_ppo(cfg, collision=True)
+    resumed.load_state_dict(state)
+    torch.testing.assert_close(resumed.act_deterministic(obs), a.act_deterministic(obs), rtol=0, atol=0)
+    torch.testing.assert_close(resumed.policy.net(obs)[0], a.policy.net(obs)[0], rtol=0, atol=0)
+    for cfg_b in (cfg, PPOConfig(horizon=64, batch_size=32)):  # evaluation builds the agent from the run's config
+        frozen = fly_ppo(cfg_b, collision=True)
+        frozen.load_state_dict(state, weights_only=True)
+        torch.testing.assert_close(frozen.act_deterministic(obs), a.act_deterministic(obs), rtol=0, atol=0)
+    assert "net_average" not in fly_ppo(PPOConfig(), collision=True).state_dict()
+    del state["net_average"]
+    with pytest.raises(ValueError, match="ema_decay"):
+        fly_ppo(cfg, collision=True).load_state_dict(state)
