@@ -97,3 +97,31 @@ def test_sparse_memory_per_env_meets_the_big_map_targets():
                     ignition=IgnitionConfig(fire_percentage=0.015), num_envs=1)
     assert sim.layout == "sparse"
     assert sim.memory_bytes_per_env() <= 4 * 2**20 < dense.memory_bytes_per_env() / 10
+
+
+def test_grouped_timers_read_and_write_as_one_vector_field_with_each_group_in_its_own_array():
+    import taichi as ti
+    from taichi.lang.field import ScalarField
+
+    from roshan.kernels.fire import _grouped_vector_field
+    from roshan.runtime import ensure_taichi
+
+    ensure_taichi()
+    groups = ((1, 2), (0, 3), (4,))
+    grouped = _grouped_vector_field(ti.f64, (2, 5), groups)
+
+    @ti.kernel
+    def fill():
+        for e, r in ti.ndrange(2, 5):
+            for k in ti.static(range(5)):
+                grouped[e, r][k] = e * 100.0 + r * 10.0 + k
+
+    fill()
+    expected = (np.arange(2)[:, None, None] * 100.0 + np.arange(5)[None, :, None] * 10.0
+                + np.arange(5)[None, None, :])
+    assert np.array_equal(grouped.to_numpy(), expected)
+    parents = [ScalarField(m).snode.parent().ptr.id for m in grouped._get_field_members()]
+    assert parents[1] == parents[2] and parents[0] == parents[3]  # a group shares one array of records
+    assert len({parents[1], parents[0], parents[4]}) == 3
+    with pytest.raises(AssertionError):
+        _grouped_vector_field(ti.f64, (2, 5), ((0, 1), (1, 2)))  # a component twice, one missing
