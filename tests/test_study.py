@@ -162,6 +162,19 @@ def test_stale_trials_are_failed_and_queued_again_with_their_parameters(tmp_path
     assert (b.used, b.waiting, b.to_start) == (2, 2, 2)  # the two retried trials do not count, their retries do
 
 
+@pytest.mark.filterwarnings("ignore::optuna.exceptions.ExperimentalWarning", "ignore:Heartbeat of storage")
+def test_a_paused_worker_of_this_machine_keeps_its_trial_however_old_its_heartbeat(tmp_path):
+    storage = HeartbeatJournalStorage(str(tmp_path / "s.journal"), heartbeat_interval=1, grace_period=30,
+                                         callback=RetryStaleTrial(max_retry=3))
+    study = optuna.create_study(storage=storage)
+    for worker in (worker_record(), {"host": "elsewhere/1", "pid": os.getpid()}):  # SIGSTOPped here / silent there
+        trial = study.ask({"x": FloatDistribution(0.0, 1.0)})
+        trial.set_user_attr(WORKER_ATTR, worker)
+        trial.set_user_attr(HEARTBEAT_ATTR, time.time() - 3600)
+    fail_stale(study)
+    assert [t.state for t in study.trials] == [TrialState.RUNNING, TrialState.FAIL, TrialState.WAITING]
+
+
 # ------------------------------------------------------------------------------------------------ top-k, report
 
 

@@ -214,9 +214,21 @@ def run_worker(spec: Spec, storage_url: str, root: str | Path, execute: Execute 
     except Exception:
         study.tell(trial, state=TrialState.FAIL)  # failed for good: the traceback says why; retry by hand
         raise
+    try:
+        record_result(study, trial, result)
+    except UpdateFinishedTrialError:
+        # Found stale while it worked (silent past the grace period, seen from another machine): the trial is
+        # failed and its retry queued. The result is not lost: the retry, when still waiting, gets it.
+        retry = claim(study, {key: 0})
+        if retry is not None:
+            retry[0].set_user_attr(WORKER_ATTR, worker_record())
+            record_result(study, retry[0], result)
+    return 0
+
+
+def record_result(study: optuna.Study, trial: optuna.Trial, result: dict) -> None:
     trial.set_user_attr(RESULT_ATTR, result)
     study.tell(trial, float(result.get("success_rate", 0.0)))
-    return 0
 
 
 # ------------------------------------------------------------------------------------------ one run

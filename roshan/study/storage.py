@@ -4,7 +4,8 @@ liveness of worker processes.
 
 A trial whose worker died (killed, out of memory, machine lost) stays RUNNING in the storage until it is found
 stale: at once when its worker was a process on this machine that no longer exists, otherwise when its
-heartbeat is older than the grace period. It is then marked FAIL and queued again with the same parameters.
+heartbeat is older than the grace period and its worker is not a process that still runs here (a paused
+worker keeps its run). It is then marked FAIL and queued again with the same parameters.
 """
 
 from __future__ import annotations
@@ -90,6 +91,13 @@ def is_dead_here(record: dict | None) -> bool:
     return start == "zombie" or (record.get("start") is not None and start is not None and start != record["start"])
 
 
+def is_alive_here(record: dict | None) -> bool:
+    """True when ``record`` names a process of this machine that still runs. Such a trial is never stale,
+    however old its heartbeat: a paused worker (SIGSTOP, a suspended machine) still owns its run, and failing
+    it would start the run a second time beside it."""
+    return bool(record) and record.get("host") == HOST_ID and not is_dead_here(record)
+
+
 class RetryStaleTrial(RetryHeartbeatStaleTrialCallback):
     """Optuna's retry of a stale trial (same parameters, ``retry_history`` kept), minus the dead worker's
     liveness attributes, which would make the retry look stale before its new worker writes its own."""
@@ -118,7 +126,8 @@ class HeartbeatJournalStorage(JournalStorage, BaseHeartbeat):
         now, stale = time.time(), []
         for t in self.get_all_trials(study_id, deepcopy=False, states=(TrialState.RUNNING,)):
             last = t.user_attrs.get(HEARTBEAT_ATTR) or (t.datetime_start.timestamp() if t.datetime_start else now)
-            if is_dead_here(t.user_attrs.get(WORKER_ATTR)) or now - last > self.grace_period:
+            worker = t.user_attrs.get(WORKER_ATTR)
+            if is_dead_here(worker) or (now - last > self.grace_period and not is_alive_here(worker)):
                 stale.append(t._trial_id)
         return stale
 
@@ -131,13 +140,16 @@ class HeartbeatJournalStorage(JournalStorage, BaseHeartbeat):
 
 class HeartbeatRDBStorage(RDBStorage):
     """Optuna's RDB storage (heartbeats in the database), plus: a trial whose worker was a process on this
-    machine that no longer exists is stale at once."""
+    machine that no longer exists is stale at once, and one whose worker still runs here is never stale."""
 
     def _get_stale_trial_ids(self, study_id: int) -> list[int]:
         stale = set(super()._get_stale_trial_ids(study_id))
         for t in self.get_all_trials(study_id, deepcopy=False, states=(TrialState.RUNNING,)):
-            if is_dead_here(t.user_attrs.get(WORKER_ATTR)):
+            worker = t.user_attrs.get(WORKER_ATTR)
+            if is_dead_here(worker):
                 stale.add(t._trial_id)
+            elif is_alive_here(worker):
+                stale.discard(t._trial_id)
         return sorted(stale)
 
 

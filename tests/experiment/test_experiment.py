@@ -210,6 +210,33 @@ def test_only_runs_the_chosen_conditions_and_leaves_the_rest_queued(tmp_path):
     assert lines(log, "done")[-1] == "fast/seed_0"
 
 
+def test_a_run_failed_as_stale_while_it_worked_records_its_result_on_its_retry(tmp_path):
+    """Another machine saw the worker silent past the grace period (paused, cut off) and failed its trial; the
+    finished run's result goes to the queued retry, so it is not run again."""
+    from optuna.trial import TrialState
+
+    from roshan.study.storage import RetryStaleTrial, experimental
+
+    spec, url, study = start(write_spec(tmp_path), tmp_path)
+    log = tmp_path / "log"
+
+    def failed_meanwhile(run, folder):
+        running = study.get_trials(deepcopy=False, states=(TrialState.RUNNING,))[0]
+        study._storage.set_trial_state_values(running._trial_id, state=TrialState.FAIL)
+        with experimental():  # what fail_stale does on the other machine
+            RetryStaleTrial(max_retry=3)(study, study._storage.get_trial(running._trial_id))
+        return recording_execute(log)(run, folder)
+
+    assert run_worker(spec, url, tmp_path, execute=failed_meanwhile, only=("fast",)) == 0
+    trials = study.get_trials(deepcopy=False)
+    assert [t.state for t in trials if t.user_attrs.get("run") == "fast/seed_0"] == [TrialState.FAIL,
+                                                                                     TrialState.COMPLETE]
+    retry = [t for t in trials if t.state == TrialState.COMPLETE][0]
+    assert retry.user_attrs["result"]["run"] == "fast/seed_0" and retry.value == 0.0
+    assert lines(log, "done") == ["fast/seed_0"]
+    assert progress(study) == {"done": 1, "running": 0, "waiting": 5, "failed": 0}  # the retry did it
+
+
 # ------------------------------------------------------------------------------------------ the report
 
 
