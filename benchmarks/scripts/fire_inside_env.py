@@ -77,5 +77,6 @@ def main() -> None:
                   f"{v['chunks', 1]:>11.1f}{v['chunks', 2]:>11.1f}{v['chunks', 2] / v['envs', 1]:>21.2f}"
                   f"{v['chunks', 2] / v['chunks', 1]:>16.2f}")
 
+
 if __name__ == "__main__":
     main()
