@@ -18,6 +18,9 @@ A spec is a YAML file::
       E7_iql:
         config: configs/iql_offline.yaml
         buffer: {model: models/fly_collision, transitions: 200000}   # recorded once, shared by the seeds
+      E1_ppo_long:
+        base: E1_ppo                             # E1_ppo's keys (not its note); `set`, `thesis_set` and `eval`
+        set: {train.total_steps: 540672}         # merged key by key, this condition's values winning
 
 Expanded, every (condition, seed) is one run, keyed ``<condition>/seed_<s>``; its config is the condition's with
 ``sim.seed`` = s. A condition's evaluation plays the same episodes for every seed (the env seed is the spec's).
@@ -215,6 +218,39 @@ def _resolve(path: str, spec_dir: Path, where: str) -> str:
 
 _CONDITION_KEYS = {"config", "seeds", "set", "thesis_set", "controller", "eval", "buffer", "thesis", "note"}
 _EVAL_KEYS = {"episodes", "seed", "envs"}
+_MERGED_KEYS = ("set", "thesis_set", "eval")  # mappings a condition with a `base` merges key by key
+
+
+def _inherit(name: str, raw: Any, earlier: dict[str, dict], where: str) -> Any:
+    """A condition with ``base: OTHER`` is OTHER's mapping (as OTHER itself expanded, so bases chain) with this
+    condition's keys over it: ``set``, ``thesis_set`` and ``eval`` merged key by key, any other key replaced.
+    OTHER's note is not inherited (it describes OTHER). OTHER must be listed before this condition."""
+    if not isinstance(raw, dict) or "base" not in raw:
+        return raw
+    at = f"{where}: conditions.{name}.base"
+    base = raw["base"]
+    if base not in earlier:
+        listed = ", ".join(earlier) or "none"
+        raise SpecError(f"{at}: expected a condition listed before this one, got {base!r} (listed before: {listed})")
+    merged = {k: v for k, v in earlier[base].items() if k != "note"}
+    for key, value in raw.items():
+        if key == "base":
+            continue
+        if key in _MERGED_KEYS and value is not None and merged.get(key) is not None:
+            where_key = f"{where}: conditions.{name}.{key}"
+            merged[key] = {**_as_mapping(merged[key], where_key), **_as_mapping(value, where_key)}
+        else:
+            merged[key] = value
+    return merged
+
+
+def _as_mapping(value: Any, where: str) -> dict:
+    """A ``set``-like value (a mapping, or a list of "key=value") as a mapping."""
+    if isinstance(value, dict):
+        return value
+    if isinstance(value, list) and all(isinstance(v, str) and "=" in v for v in value):
+        return dict(v.split("=", 1) for v in value)
+    raise SpecError(f"{where}: expected a mapping, or a list of 'key=value', got {value!r}")
 
 
 def _condition(name: str, raw: Any, defaults: dict, spec_dir: Path, budget: str, where: str) -> Condition:
@@ -225,7 +261,7 @@ def _condition(name: str, raw: Any, defaults: dict, spec_dir: Path, budget: str,
         raise SpecError(f"{at}: expected a mapping (config, seeds, set, ...), got {raw!r}")
     unknown = set(raw) - _CONDITION_KEYS
     if unknown:
-        expected = ", ".join(sorted(_CONDITION_KEYS))
+        expected = ", ".join(sorted(_CONDITION_KEYS | {"base"}))
         raise SpecError(f"{at}: unknown key(s) {', '.join(sorted(unknown))}; expected {expected}")
     controller = raw.get("controller", "policy")
     if controller not in CONTROLLERS:
@@ -284,6 +320,9 @@ def load_spec(path: str | Path, budget: str = "local") -> Spec:
     if not _NAME.match(name):
         raise SpecError(f"{path}: name {name!r} may hold letters, digits, '_', '-' and '.' only")
     defaults = {"seeds": raw.get("seeds", 3), "eval": raw.get("eval") or {}}
-    conditions = tuple(_condition(str(k), v, defaults, path.parent, budget, str(path))
-                       for k, v in raw["conditions"].items())
-    return Spec(name, str(path), budget, conditions)
+    expanded: dict[str, dict] = {}  # each condition's mapping with its base's keys in it, for the ones after it
+    conditions = []
+    for k, v in raw["conditions"].items():
+        expanded[str(k)] = _inherit(str(k), v, expanded, str(path))
+        conditions.append(_condition(str(k), expanded[str(k)], defaults, path.parent, budget, str(path)))
+    return Spec(name, str(path), budget, tuple(conditions))

@@ -18,7 +18,7 @@ import optuna
 import pytest
 
 from roshan.experiment.report import condition_rows, markdown, rate
-from roshan.experiment.runner import prepare_experiment, progress, run_worker
+from roshan.experiment.runner import STUDY_ATTR, prepare_experiment, progress, run_key, run_worker
 from roshan.experiment.spec import Reference, SpecError, load_spec
 from roshan.study.storage import open_storage
 
@@ -89,6 +89,89 @@ def test_a_missing_config_file_is_named(tmp_path):
     path.write_text("conditions:\n  a:\n    config: nowhere.yaml\n")
     with pytest.raises(SpecError, match=r"conditions.a.config: nowhere.yaml not found"):
         load_spec(path)
+
+
+BASED = """
+conditions:
+  a:
+    config: {config}
+    set: {{train.max_updates: 3, sim.envs: 4}}
+    eval: {{episodes: 4, seed: 9}}
+    thesis: {{success: 91.15}}
+    note: about a
+  b:
+    base: a
+    set: [train.max_updates=5]
+  c:
+    base: b
+    seeds: [4]
+    set: {{ppo.max_grad_norm: 0}}
+    eval: {{envs: 2}}
+"""
+
+WRITTEN_OUT = """
+conditions:
+  a:
+    config: {config}
+    set: {{train.max_updates: 3, sim.envs: 4}}
+    eval: {{episodes: 4, seed: 9}}
+    thesis: {{success: 91.15}}
+    note: about a
+  b:
+    config: {config}
+    set: {{sim.envs: 4, train.max_updates: 5}}
+    eval: {{episodes: 4, seed: 9}}
+    thesis: {{success: 91.15}}
+  c:
+    config: {config}
+    seeds: [4]
+    set: {{train.max_updates: 5, sim.envs: 4, ppo.max_grad_norm: 0}}
+    eval: {{episodes: 4, seed: 9, envs: 2}}
+    thesis: {{success: 91.15}}
+"""
+
+
+def test_a_condition_with_a_base_is_the_base_written_out_with_its_own_keys_over_it(tmp_path):
+    based = load_spec(write_spec(tmp_path, BASED))
+    (tmp_path / "out").mkdir()
+    written = load_spec(write_spec(tmp_path / "out", WRITTEN_OUT))
+    assert based.fingerprints() == written.fingerprints()
+    assert list(based.fingerprints()) == ["a/seed_0", "a/seed_1", "a/seed_2", "b/seed_0", "b/seed_1", "b/seed_2",
+                                          "c/seed_4"]
+    a, b, c = based.conditions
+    assert b.run_config(0).train.max_updates == 5 and b.run_config(0).sim.envs == 4  # set merged, b's value wins
+    assert c.run_config(4).ppo.max_grad_norm == 0 and c.run_config(4).train.max_updates == 5  # through b
+    assert (c.eval_episodes, c.eval_seed, c.eval_envs) == (4, 9, 2)
+    assert b.thesis == a.thesis and (a.note, b.note, c.note) == ("about a", "", "")
+    assert based.fingerprints()["b/seed_0"] != based.fingerprints()["a/seed_0"]
+
+
+@pytest.mark.parametrize("change, message", [
+    (("base: a", "base: c"), "conditions.b.base: expected a condition listed before this one, got 'c' "
+                             "(listed before: a)"),
+    (("base: a", "base: b"), "conditions.b.base: expected a condition listed before this one, got 'b'"),
+    (("base: b", "bass: b"), "conditions.c: unknown key(s) bass; expected base, buffer"),
+    (("set: [train.max_updates=5]", "set: [train.max_updates]"), "conditions.b.set: expected a mapping"),
+])
+def test_a_bad_base_is_named(tmp_path, change, message):
+    path = write_spec(tmp_path, BASED.replace(*change))
+    with pytest.raises(SpecError) as err:
+        load_spec(path)
+    assert message in str(err.value) and str(path) in str(err.value)
+
+
+def test_the_thesis_spec_still_means_what_its_journal_ran(tmp_path):
+    """The committed spec against the runs its journal recorded: a row rewritten (e.g. with a ``base``) must keep
+    every started run's settings, or ``roshan experiment run`` would refuse the journal."""
+    journal = tmp_path / "experiment.journal"
+    journal.write_bytes((REPO / "benchmarks" / "results" / "thesis" / "experiment.journal").read_bytes())
+    spec = load_spec(REPO / "configs" / "experiments" / "thesis.yaml")
+    study = optuna.load_study(study_name=spec.name, storage=open_storage(str(journal), heartbeat=None))
+    stored = study.user_attrs[STUDY_ATTR]["runs"]
+    started = {run_key(t) for t in study.get_trials(deepcopy=False) if t.state != optuna.trial.TrialState.WAITING}
+    prints = {k: fp for k, fp in spec.fingerprints().items() if k in started}
+    assert len(prints) > 100
+    assert prints == {k: stored[k] for k in prints}
 
 
 # ------------------------------------------------------------------------------------------ running (fakes)
