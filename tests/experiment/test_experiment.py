@@ -69,28 +69,6 @@ def test_spec_expands_to_conditions_times_seeds(tmp_path):
     assert thesis.fingerprints()["greedy/seed_0"] == spec.fingerprints()["greedy/seed_0"]
 
 
-@pytest.mark.parametrize("change, message", [
-    (("seeds: 2", "seeds: 0"), "conditions.fast.seeds: expected a number of seeds"),
-    (("controller: greedy", "controller: heuristic"), "conditions.greedy.controller: expected one of policy, greedy"),
-    (("thesis_set:", "thesis_sets:"), "conditions.fast: unknown key(s) thesis_sets"),
-    (("(100.0)", "(100.0"), "conditions.fast.thesis.success: expected 'mean ± std (median)'"),
-    (("sim.envs: 4", "sim.envz: 4"), "conditions.fast: "),
-    (("seeds: [5, 7, 11]", "seeds: [5, 5]"), "a seed is listed twice"),
-])
-def test_bad_specs_name_the_condition_and_key(tmp_path, change, message):
-    path = write_spec(tmp_path, SPEC.replace(*change))
-    with pytest.raises(SpecError) as err:
-        load_spec(path)
-    assert message in str(err.value) and str(path) in str(err.value)
-
-
-def test_a_missing_config_file_is_named(tmp_path):
-    path = tmp_path / "spec.yaml"
-    path.write_text("conditions:\n  a:\n    config: nowhere.yaml\n")
-    with pytest.raises(SpecError, match=r"conditions.a.config: nowhere.yaml not found"):
-        load_spec(path)
-
-
 BASED = """
 conditions:
   a:
@@ -109,15 +87,15 @@ conditions:
     eval: {{envs: 2}}
 """
 
-WRITTEN_OUT = """
-conditions:
-  a:
-    config: {config}
-    set: {{train.max_updates: 3, sim.envs: 4}}
-    eval: {{episodes: 4, seed: 9}}
-    thesis: {{success: 91.15}}
-    note: about a
-  b:
+BASE_ERRORS = [
+    (("base: a", "base: c"), "conditions.b.base: expected a condition listed before this one, got 'c' "
+                             "(listed before: a)"),
+    (("base: a", "base: b"), "conditions.b.base: expected a condition listed before this one, got 'b'"),
+    (("base: b", "bass: b"), "conditions.c: unknown key(s) bass; expected base, buffer"),
+    (("set: [train.max_updates=5]", "set: [train.max_updates]"), "conditions.b.set: expected a mapping"),
+]
+
+WRITTEN_OUT = BASED[: BASED.index("  b:")] + """  b:
     config: {config}
     set: {{sim.envs: 4, train.max_updates: 5}}
     eval: {{episodes: 4, seed: 9}}
@@ -146,18 +124,26 @@ def test_a_condition_with_a_base_is_the_base_written_out_with_its_own_keys_over_
     assert based.fingerprints()["b/seed_0"] != based.fingerprints()["a/seed_0"]
 
 
-@pytest.mark.parametrize("change, message", [
-    (("base: a", "base: c"), "conditions.b.base: expected a condition listed before this one, got 'c' "
-                             "(listed before: a)"),
-    (("base: a", "base: b"), "conditions.b.base: expected a condition listed before this one, got 'b'"),
-    (("base: b", "bass: b"), "conditions.c: unknown key(s) bass; expected base, buffer"),
-    (("set: [train.max_updates=5]", "set: [train.max_updates]"), "conditions.b.set: expected a mapping"),
-])
-def test_a_bad_base_is_named(tmp_path, change, message):
-    path = write_spec(tmp_path, BASED.replace(*change))
+@pytest.mark.parametrize("text, change, message", [(SPEC, *c) for c in [
+    (("seeds: 2", "seeds: 0"), "conditions.fast.seeds: expected a number of seeds"),
+    (("controller: greedy", "controller: heuristic"), "conditions.greedy.controller: expected one of policy, greedy"),
+    (("thesis_set:", "thesis_sets:"), "conditions.fast: unknown key(s) thesis_sets"),
+    (("(100.0)", "(100.0"), "conditions.fast.thesis.success: expected 'mean ± std (median)'"),
+    (("sim.envs: 4", "sim.envz: 4"), "conditions.fast: "),
+    (("seeds: [5, 7, 11]", "seeds: [5, 5]"), "a seed is listed twice"),
+]] + [(BASED, *c) for c in BASE_ERRORS])
+def test_bad_specs_name_the_condition_and_key(tmp_path, text, change, message):
+    path = write_spec(tmp_path, text.replace(*change))
     with pytest.raises(SpecError) as err:
         load_spec(path)
     assert message in str(err.value) and str(path) in str(err.value)
+
+
+def test_a_missing_config_file_is_named(tmp_path):
+    path = tmp_path / "spec.yaml"
+    path.write_text("conditions:\n  a:\n    config: nowhere.yaml\n")
+    with pytest.raises(SpecError, match=r"conditions.a.config: nowhere.yaml not found"):
+        load_spec(path)
 
 
 def test_the_thesis_spec_still_means_what_its_journal_ran(tmp_path):
