@@ -181,10 +181,15 @@ def parse_reference(value: Any, where: str) -> Reference:
 def _sets(value: Any, where: str) -> tuple[str, ...]:
     if value is None:
         return ()
+    return tuple(f"{k}={_yaml_scalar(v)}" for k, v in _as_mapping(value, where).items())
+
+
+def _as_mapping(value: Any, where: str) -> dict:
+    """A ``set``-like value (a mapping, or a list of "key=value") as a mapping."""
     if isinstance(value, dict):
-        return tuple(f"{k}={_yaml_scalar(v)}" for k, v in value.items())
+        return value
     if isinstance(value, list) and all(isinstance(v, str) and "=" in v for v in value):
-        return tuple(value)
+        return dict(v.split("=", 1) for v in value)
     raise SpecError(f"{where}: expected a mapping of config keys to values, or a list of 'key=value', got {value!r}")
 
 
@@ -242,15 +247,6 @@ def _inherit(name: str, raw: Any, earlier: dict[str, dict], where: str) -> Any:
         else:
             merged[key] = value
     return merged
-
-
-def _as_mapping(value: Any, where: str) -> dict:
-    """A ``set``-like value (a mapping, or a list of "key=value") as a mapping."""
-    if isinstance(value, dict):
-        return value
-    if isinstance(value, list) and all(isinstance(v, str) and "=" in v for v in value):
-        return dict(v.split("=", 1) for v in value)
-    raise SpecError(f"{where}: expected a mapping, or a list of 'key=value', got {value!r}")
 
 
 def _condition(name: str, raw: Any, defaults: dict, spec_dir: Path, budget: str, where: str) -> Condition:
