@@ -1,4 +1,4 @@
-"""What two threads give on this machine for three kinds of Taichi range-for, beside the fire update's parallel
+"""What two threads give on this machine for four Taichi range-for passes, beside the fire update's parallel
 path (BENCHMARKS "A parallel path inside one env"): pure arithmetic (no memory traffic), and a read-modify-write
 of an f64 record per listed cell, 329k cells of a 941k-cell array (the burning pass's pattern): 16-byte records
 (15 MB, within the L3 cache) listed in ascending cell order and scattered, and 64-byte records (60 MB) scattered.
@@ -18,7 +18,7 @@ CELLS, LISTED, ITEMS = 941_000, 329_000, 4096
 
 
 def child(threads: int) -> None:
-    """One process: the three passes at ``threads`` threads (Taichi kernels need a source file, not ``-c``)."""
+    """One process: the four passes at ``threads`` threads (Taichi kernels need a source file, not ``-c``)."""
     import time
 
     import numpy as np
