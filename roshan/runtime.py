@@ -9,6 +9,12 @@ from collections.abc import Callable
 import taichi as ti
 
 ARCHES = ("cpu", "cuda", "vulkan", "auto")
+# Taichi's default fast math lets LLVM use approximate reciprocals and square roots (RCP14/RSQRT14 and the like)
+# and fuse or reorder float operations freely. The approximations are vendor-specific: the FlyAgent kernels gave
+# other trajectories on an Intel AVX-512 Xeon than on the AMD EPYC that recorded the behaviour pins. With exact
+# (IEEE) math both CPUs give the same bits (the Xeon's fast_math=False hashes are the ones pinned now). What it
+# costs: BENCHMARKS.md, "Same numbers on every CPU"; tests/test_runtime.py holds the setting.
+FAST_MATH = False
 _current: dict[str, object] = {}
 _reset_hooks: list[Callable[[], None]] = []
 # Bumped whenever the runtime is reset or re-initialised: an object that holds fields compares the number it was
@@ -49,7 +55,7 @@ def init_taichi(arch: str = "cpu", threads: int | None = None, debug: bool = Fal
     key = {"arch": arch, "threads": threads, "debug": debug}
     if _current.get("key") == key:
         return str(_current["arch"])
-    kwargs: dict[str, object] = {"debug": debug, "random_seed": 0, "log_level": ti.WARN}
+    kwargs: dict[str, object] = {"debug": debug, "random_seed": 0, "log_level": ti.WARN, "fast_math": FAST_MATH}
     if threads is not None:
         kwargs["cpu_max_num_threads"] = threads
     if _current:  # ti.init re-initialises: every field and kernel of the old runtime dies

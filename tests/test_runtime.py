@@ -7,6 +7,7 @@ import sys
 
 import numpy as np
 import pytest
+import taichi as ti
 
 from roshan import runtime
 from roshan.kernels.fire import FireSim
@@ -57,3 +58,36 @@ def test_vulkan_is_refused_because_its_fire_differs_from_the_cpu():
     if vulkan[0] != "vulkan":
         pytest.skip("no Vulkan driver here (apt-get install mesa-vulkan-drivers)")
     assert vulkan[1] != cpu[1], "Vulkan now matches the CPU on this seed: check 20 seeds and lift the refusal"
+
+
+def test_taichi_runs_with_exact_math():
+    """Fast math lets LLVM use vendor-specific approximate reciprocals and square roots; the FlyAgent's
+    trajectories then differ between an Intel and an AMD CPU (issue 35). The runtime turns it off."""
+    runtime.ensure_taichi()
+    assert ti.lang.impl.current_cfg().fast_math is False
+
+
+def test_float_arithmetic_is_evaluated_as_written():
+    """What exact math buys: a kernel's f32 arithmetic rounds as written (numpy's bits), so no CPU's code generator
+    may fuse a multiply-add, reassociate a sum or approximate a division. Under fast math LLVM folds
+    ``(x + y) - x`` to ``y`` (this test then fails) and may fuse or approximate the rest, choices that vary with
+    the target CPU (issue 35)."""
+    runtime.ensure_taichi()
+    rng = np.random.default_rng(0)
+    x, y, z = (rng.uniform(-1e3, 1e3, 4096).astype(np.float32) for _ in range(3))
+    out = np.zeros((4, 4096), np.float32)
+
+    @ti.kernel
+    def as_written(x: ti.types.ndarray(), y: ti.types.ndarray(), z: ti.types.ndarray(), out: ti.types.ndarray()):
+        for i in range(x.shape[0]):
+            out[0, i] = x[i] * y[i] + z[i]
+            out[1, i] = (x[i] * 1e4 + y[i]) - x[i] * 1e4
+            out[2, i] = x[i] / y[i]
+            out[3, i] = 1.0 / ti.sqrt(ti.abs(z[i]))
+
+    as_written(x, y, z, out)
+    big = x * np.float32(1e4)
+    np.testing.assert_array_equal(out[0], x * y + z)
+    np.testing.assert_array_equal(out[1], (big + y) - big)
+    np.testing.assert_array_equal(out[2], x / y)
+    np.testing.assert_array_equal(out[3], np.float32(1.0) / np.sqrt(np.abs(z)))
