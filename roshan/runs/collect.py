@@ -36,12 +36,6 @@ class DroneRows:
     def env_actions(self, actions: torch.Tensor, num_envs: int) -> torch.Tensor:
         return actions.view(num_envs, self.per_env, *actions.shape[1:])
 
-    @staticmethod
-    def sampling_generator(generator: torch.Generator) -> None:
-        """FlyAgent actions have always been drawn from torch's global RNG (seeded by ``sim.seed``), not the
-        trainer's generator; keeping that keeps every earlier run reproducible bit for bit."""
-        return None
-
 
 class EnvRows:
     """Planner rows: one per env; observations, rewards and flags are the env's own."""
@@ -64,11 +58,6 @@ class EnvRows:
     @staticmethod
     def env_actions(actions: torch.Tensor, num_envs: int) -> torch.Tensor:
         return actions
-
-    @staticmethod
-    def sampling_generator(generator: torch.Generator) -> torch.Generator:
-        """Planner actions are drawn from the trainer's generator (it must live on the net's device)."""
-        return generator
 
 
 def level_rows(cfg: Config) -> DroneRows | EnvRows:
@@ -118,12 +107,11 @@ class RolloutCollector:
     def collect(self, generator: torch.Generator | None = None) -> Rollout:
         env, agent, rows = self.env, self.agent, self.rows
         bootstrap = agent.cfg.bootstrap_truncated
-        sampling = rows.sampling_generator(generator)
         self.trunc_values.zero_()
         self.cache.clear()  # the parameters changed in the last update
         for t in range(self.T):
             o = rows.obs(self.obs)
-            sample = agent.sample(o, sampling, self.cache)
+            sample = agent.sample(o, generator, self.cache)  # the trainer's generator: no global RNG
             self._store(t, o, sample)
             self.obs, r, term, trunc, info = env.step(rows.env_actions(sample.action, env.num_envs))
             self.rewards[t] = rows.rewards(r)
