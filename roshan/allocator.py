@@ -12,7 +12,6 @@ same reason; this needs no extra package). Set ``ROSHAN_MALLOC_TUNING=0`` to lea
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import os
 import sys
 
@@ -26,7 +25,7 @@ def retain_freed_memory() -> bool:
     if os.environ.get("ROSHAN_MALLOC_TUNING", "1") == "0" or not sys.platform.startswith("linux"):
         return False
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        libc = ctypes.CDLL(None)  # the process's own symbols, libc's among them (find_library runs ldconfig)
         mallopt = libc.mallopt
     except (OSError, AttributeError):  # musl and other libcs without mallopt
         return False

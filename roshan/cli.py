@@ -1,13 +1,13 @@
 """``roshan`` command line: parses options and calls into the package; no logic of its own."""
 
+import contextlib
 import json
 import sys
 from pathlib import Path
 
 import click
 
-from roshan.config import ConfigError, load_config
-from roshan.maps import MapError
+from roshan.config import load_config
 
 ARCH = click.option("--arch", type=click.Choice(["cpu", "cuda", "vulkan", "auto"]), default=None,
                     help="Where kernels run (default: config's sim.arch, cpu).")
@@ -20,6 +20,17 @@ CONFIG = click.option("--config", "-c", "config_path", type=click.Path(dir_okay=
 
 def _fail(exc: Exception) -> None:
     raise click.ClickException(str(exc)) from exc
+
+
+@contextlib.contextmanager
+def reported(*extra: type[Exception]):
+    """The one place where what a user's input can cause becomes one line and exit code 1, not a traceback:
+    ValueError (ConfigError, MapError, SpecError, OutputError, ... derive from it), OSError (missing, unreadable
+    or unwritable files), and ``extra``."""
+    try:
+        yield
+    except (ValueError, OSError, *extra) as exc:
+        _fail(exc)
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -74,22 +85,18 @@ def simulate(config_path, map_name, envs, steps, seed, fire_percentage, clusters
              "ignition.clusters": clusters, "ignition.pattern": pattern, "wind.speed": wind_speed,
              "wind.direction": wind_direction, "sim.arch": arch, "sim.threads": threads}
     overrides = [f"{k}={v}" for k, v in flags.items() if v is not None] + list(sets)
-    try:
+    with reported():
         cfg = load_config(config_path, overrides)
         sim_mod.prepare_outputs(Path(frames) if frames else None, Path(gif) if gif else None,
                                 Path(json_path) if json_path else None)
         result = sim_mod.run_simulation(cfg, steps, every, Path(frames) if frames else None,
                                         Path(gif) if gif else None, progress=not quiet, drones=drones,
                                         policy=policy or "greedy")
-    except (ConfigError, MapError, ValueError, OSError) as exc:
-        _fail(exc)
     for line in sim_mod.summary_lines(result):
         click.echo(line)
     if json_path:
-        try:
+        with reported():
             sim_mod.write_json(cfg, result, Path(json_path))
-        except ValueError as exc:  # OutputError: the disk filled up meanwhile
-            _fail(exc)
         click.echo(f"json: {json_path}")
 
 
@@ -120,10 +127,8 @@ def maps_show(name_or_path, band):
     """Size in cells and metres, CRS and class histogram of a map."""
     from roshan.maps import describe_map, load_map
 
-    try:
+    with reported():
         click.echo(describe_map(load_map(name_or_path, band=band)))
-    except MapError as exc:
-        _fail(exc)
 
 
 @maps.command("crop")
@@ -135,10 +140,8 @@ def maps_crop(source, bounds, crs, output):
     """Cut a window out of a (possibly huge) CLC+ raster, reading only that window."""
     from roshan.maps import crop_map, describe_map
 
-    try:
+    with reported():
         m = crop_map(source, tuple(bounds), output, bounds_crs=crs)
-    except MapError as exc:
-        _fail(exc)
     click.echo(f"wrote {output}")
     click.echo(describe_map(m))
 
@@ -158,10 +161,8 @@ def config_show(section):
     planner.rewards, or one key such as fire.dt) shows only that part."""
     from roshan.config import show_keys
 
-    try:
+    with reported():
         click.echo(show_keys(section))
-    except ConfigError as exc:
-        _fail(exc)
 
 
 # ------------------------------------------------------------------------------------------------ train / eval
@@ -192,7 +193,7 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
 
     flags = {"sim.arch": arch, "sim.threads": threads}
     overrides = [f"{k}={v}" for k, v in flags.items() if v is not None] + list(sets)
-    try:
+    with reported(RunBusy):
         if resume_dir is not None:
             if config_path is not None:
                 raise click.UsageError("give either CONFIG or --resume RUN (a resumed run keeps its config)")
@@ -202,8 +203,6 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
         else:
             cfg = load_run_config(config_path, overrides)
             results = tr.train_auto(cfg, root, name, progress_bar=not quiet, evaluate_at_end=not no_eval)
-    except (ConfigError, MapError, ValueError, OSError, RunBusy) as exc:
-        _fail(exc)
     for res in results:
         click.echo(tr.result_lines(res))
 
@@ -252,7 +251,7 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, replace, f
     from roshan.runs.report.tables import format_comparison, format_table
     from roshan.runtime import init_taichi
 
-    try:
+    with reported():
         init_taichi(arch or "cpu", threads)
         if save_buffer is not None:
             n, path = save_buffer
@@ -265,8 +264,6 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, replace, f
                                   frames_dir=Path(frames_dir) if frames_dir else None,
                                   gif_path=Path(gif_path) if gif_path else None, which=which,
                                   progress_bar=not quiet, overrides=sets, baseline=baseline, replace=replace)
-    except (ConfigError, MapError, ValueError, OSError) as exc:
-        _fail(exc)
     title = f"{target} ({Path(summary['checkpoint']).stem}, seed {seed})"
     if baseline is not None:
         click.echo(format_comparison({"policy": summary, baseline: summary["baseline"]}, title))
@@ -298,12 +295,10 @@ def watch(target, steps, seed, which, fps, gif_path, screenshot, sets, arch, thr
     from roshan.runs.watch import watch as run_watch
     from roshan.runtime import init_taichi
 
-    try:
+    with reported():
         init_taichi(arch or "cpu", threads)
         click.echo(run_watch(target, steps=steps, seed=seed, which=which, fps=fps, gif_path=Path(gif_path),
                              screenshot=Path(screenshot) if screenshot else None, overrides=sets))
-    except (ConfigError, MapError, ValueError, OSError) as exc:
-        _fail(exc)
 
 
 # ------------------------------------------------------------------------------------------------ study
@@ -363,7 +358,7 @@ def study_run(config_path, space_path, trials, storage, workers, name, root, res
     from roshan.study.runner import start_study
     from roshan.study.trial import local_values, run_worker
 
-    try:
+    with reported():
         if worker:
             sys.exit(run_worker(storage, name, root, slot, local_values(arch, threads), quiet, heartbeat, max_retry))
         start_study(config_path, space_path, sets, name=name, root=root, storage=storage, resume=resume,
@@ -371,8 +366,6 @@ def study_run(config_path, space_path, trials, storage, workers, name, root, res
                     max_retry=max_retry, echo=click.echo, objective=objective, seed=seed,
                     startup_trials=startup_trials, prune=prune, prune_startup=prune_startup,
                     prune_warmup=prune_warmup)
-    except (ConfigError, MapError, ValueError, OSError) as exc:
-        _fail(exc)
 
 
 @study.command("report")
@@ -389,11 +382,9 @@ def study_report(target, name, root, top_k, out_dir, no_plots):
     trials' parameters as a ready config YAML, and Optuna's plots."""
     from roshan.study.report import open_for_report, write_report
 
-    try:
+    with reported():
         stu, default_out = open_for_report(target, root, name)
         rep = write_report(stu, Path(out_dir) if out_dir else default_out, top_k, plots=not no_plots)
-    except (ConfigError, ValueError, OSError) as exc:
-        _fail(exc)
     click.echo(f"study {stu.study_name}: {len(stu.trials)} trials; the best completed:")
     click.echo(rep["table"])
     for path in rep["files"]:
@@ -445,7 +436,7 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
     from roshan.experiment.spec import load_spec
     from roshan.study.trial import local_values
 
-    try:
+    with reported():
         spec = load_spec(spec_path, budget)
         chosen = spec.select(only)
         extra = tuple(f"{k}={v}" for k, v in local_values(arch, threads).items())
@@ -454,8 +445,6 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
             sys.exit(run_worker(spec, url, root, heartbeat=heartbeat, max_retry=max_retry, extra=extra, only=chosen))
         args = (["--arch", arch] if arch else []) + (["--threads", str(threads)] if threads else [])
         run_experiment(spec, root, storage, workers, args, heartbeat, max_retry, echo=click.echo, only=chosen)
-    except (ConfigError, MapError, ValueError, OSError) as exc:
-        _fail(exc)
     click.echo(f"report: roshan experiment report {spec_path}" + (f" --budget {budget}" if budget != "local" else "")
                + (f" --storage {storage}" if storage else "") + (f" --root {root}" if root != "runs" else ""))
 
@@ -475,7 +464,7 @@ def experiment_report(spec_path, budget, storage, root, out_dir):
     from roshan.experiment.spec import load_spec
     from roshan.study.storage import open_storage
 
-    try:
+    with reported():
         spec = load_spec(spec_path, budget)
         url = storage or default_storage(root, spec.name)
         if not storage and not Path(url).is_file():
@@ -484,8 +473,6 @@ def experiment_report(spec_path, budget, storage, root, out_dir):
         study = load_experiment(open_storage(url, heartbeat=None, repair=False), spec.name)
         out = Path(out_dir) if out_dir else experiment_dir(root, spec.name) / "report"
         rows = write_report(spec, study, out)
-    except (ConfigError, ValueError, OSError) as exc:
-        _fail(exc)
     p = progress(study)
     click.echo(f"experiment {spec.name}: {p['done']}/{len(spec.runs())} runs done, {p['running']} running, "
                f"{p['waiting']} waiting" + (f", {p['failed']} failed" if p["failed"] else ""))
@@ -518,10 +505,8 @@ def bench_fidelity(seeds, conditions, every, json_path, plot_path, arch, threads
     conds = [c for c in b.FIDELITY_CONDITIONS if not conditions or c.name in conditions]
     if not conds:
         _fail(ValueError(f"--condition: none of {conditions}; known: {[c.name for c in b.FIDELITY_CONDITIONS]}"))
-    try:
+    with reported():
         results = b.fidelity(seeds, conds)
-    except FileNotFoundError as exc:
-        _fail(exc)
     for name, res in results.items():
         click.echo(b.format_fidelity_table(name, res, every))
     if json_path:

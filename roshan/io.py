@@ -1,15 +1,17 @@
 """Files the project writes whole: atomic writes (a reader never sees half a file), GIFs of frames, and the
 one error a command gives when it cannot write its output (:class:`OutputError`)."""
 
+from __future__ import annotations
+
 import contextlib
 import os
 import tempfile
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import BinaryIO
+from typing import TYPE_CHECKING, BinaryIO
 
-import numpy as np
-from PIL import Image
+if TYPE_CHECKING:
+    import numpy as np
 
 
 class OutputError(ValueError):
@@ -83,6 +85,9 @@ def write_atomic(path: str | os.PathLike, data: bytes) -> Path:
 
 def write_gif(frames: Sequence[Path | str | np.ndarray], out: Path | str, fps: int = 10) -> Path:
     """Write frames (PNG paths or (H, W, 3) uint8 arrays) as a GIF that loops forever; returns ``out``."""
+    import numpy as np  # here: the config layer imports this module, and `roshan --help` needs neither
+    from PIL import Image
+
     if not frames:
         raise ValueError("write_gif needs at least one frame")
     if fps < 1:

@@ -7,6 +7,7 @@ import warnings
 from collections.abc import Callable
 
 import taichi as ti
+from taichi.lang.ast.ast_transformer_utils import ASTTransformerContext
 
 ARCHES = ("cpu", "cuda", "vulkan", "auto")
 # Taichi's default fast math lets LLVM use approximate reciprocals and square roots (RCP14/RSQRT14 and the like)
@@ -60,6 +61,7 @@ def init_taichi(arch: str = "cpu", threads: int | None = None, debug: bool = Fal
         kwargs["cpu_max_num_threads"] = threads
     if _current:  # ti.init re-initialises: every field and kernel of the old runtime dies
         _run_reset_hooks()
+    _plain_source_positions(not debug)
     if arch == "cpu":
         kwargs["arch"] = ti.cpu
     elif arch == "cuda":
@@ -74,6 +76,22 @@ def init_taichi(arch: str = "cpu", threads: int | None = None, debug: bool = Fal
         warnings.warn(f"--arch {arch} requested but Taichi fell back to {used}", stacklevel=2)
     _current.update(key=key, arch=used)
     return used
+
+
+# Taichi 1.7.4 (its last release) formats a caret diagram of the source (textwrap over the line) for every AST
+# node of a kernel it transforms, only to attach it as debug info; that was ~40 % of compiling our kernels at every
+# start, and the offline cache does not skip it. Outside debug mode each node gets "File, line, function" and its
+# source line instead, which is what a compile error then shows.
+_FULL_POSITIONS = ASTTransformerContext.get_pos_info
+
+
+def _plain_position(ctx, node) -> str:
+    return (f'File "{ctx.file}", line {node.lineno + ctx.lineno_offset}, in {ctx.func.func.__name__}:\n'
+            f"{ctx.src[node.lineno - 1]}\n")
+
+
+def _plain_source_positions(plain: bool) -> None:
+    ASTTransformerContext.get_pos_info = _plain_position if plain else _FULL_POSITIONS
 
 
 def current_arch() -> str | None:

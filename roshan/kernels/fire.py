@@ -245,9 +245,9 @@ class FireSim:
         self.gen_ctr = ti.field(ti.i32, E)  # draw counter of the serial initial-fire generator
         self.normals = ti.field(ti.f32, rng.TABLE_SIZE)
         self.unit = ti.Vector.field(2, ti.f32, rng.TABLE_SIZE)
-        q = rng.normal_quantiles()
+        q, q_angles = rng.normal_quantiles(0x5EED, 0xA11CE)
         self.normals.from_numpy(q)
-        angles = 2.0 * np.pi * rng.normal_quantiles(seed=0xA11CE).astype(np.float64)
+        angles = 2.0 * np.pi * q_angles.astype(np.float64)
         self.unit.from_numpy(np.stack([np.cos(angles), np.sin(angles)], axis=1).astype(np.float32))
         self.episode.fill(-1)
         self._all = np.ones(E, dtype=np.int32)

@@ -28,14 +28,21 @@ MAX_RING_FILL_TRIES = 100_000
 
 @ti.func
 def light_initial_fires(sim: ti.template(), e):
-    pattern = ti.static(sim.pattern)
-    p = pattern
-    if ti.static(pattern == RANDOM):
+    # A fixed pattern is chosen at compile time: Taichi builds only that generator's code, which halves the reset
+    # kernel's compile time at every start. ``random`` draws one per episode (even when no fire is lit).
+    if ti.static(sim.pattern == RANDOM):
         p = rng.uniform_int(_draw(sim, e), 3)
-    if sim.num_fires > 0:
-        if p == CLUSTER:
+        if sim.num_fires > 0:
+            if p == CLUSTER:
+                _light_clusters(sim, e)
+            elif p == SCATTERED:
+                _light_scattered(sim, e, sim.num_fires)
+            else:
+                _light_rings(sim, e)
+    elif sim.num_fires > 0:
+        if ti.static(sim.pattern == CLUSTER):
             _light_clusters(sim, e)
-        elif p == SCATTERED:
+        elif ti.static(sim.pattern == SCATTERED):
             _light_scattered(sim, e, sim.num_fires)
         else:
             _light_rings(sim, e)

@@ -67,12 +67,17 @@ def high16(h: ti.u32) -> ti.i32:
     return ti.cast(h >> ti.u32(16), ti.i32)
 
 
-def normal_quantiles(seed: int = 0x5EED) -> np.ndarray:
-    """The exact N(0, 1) quantiles at (k + 0.5) / TABLE_SIZE, shuffled with a fixed seed."""
+def normal_quantiles(*seeds: int) -> list[np.ndarray]:
+    """The exact N(0, 1) quantiles at (k + 0.5) / TABLE_SIZE, one copy shuffled with each fixed seed (default
+    0x5EED). The quantiles are computed once for all seeds: 65,536 pure-Python ``inv_cdf`` calls cost ~40 ms."""
     nd = statistics.NormalDist()
     q = np.array([nd.inv_cdf((k + 0.5) / TABLE_SIZE) for k in range(TABLE_SIZE)], dtype=np.float32)
-    np.random.default_rng(seed).shuffle(q)
-    return q
+    tables = []
+    for seed in seeds or (0x5EED,):
+        t = q.copy()
+        np.random.default_rng(seed).shuffle(t)
+        tables.append(t)
+    return tables
 
 
 def base_key(seed: int, *parts: int) -> int:

@@ -17,11 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from roshan.config import Config, ConfigError, FlyConfig, replace, to_dict
-from roshan.env.fly import FlyVectorEnv
-from roshan.env.heuristics import POLICIES, policy_actions
 from roshan.io import prepare_output, write_atomic, write_gif, writing
 from roshan.kernels.fire import FireSim
-from roshan.kernels.render import FrameRenderer, drone_overlay
 from roshan.maps import load_map
 from roshan.runtime import init_taichi
 
@@ -74,6 +71,8 @@ def run_simulation(cfg: Config, steps: int, every: int = 100, frames_dir: Path |
     renderer = scratch = None
     if frames_dir is not None or gif is not None:
         frames_dir, scratch = _frames_dir(frames_dir)
+        from roshan.kernels.render import FrameRenderer  # frames only: it brings Pillow and GGUI
+
         renderer = FrameRenderer(sim)
     result = SimulationResult()
     t0 = time.perf_counter()
@@ -150,6 +149,9 @@ def run_drone_simulation(cfg: Config, steps: int, drones: int, policy: str = "gr
     (every env has made that many, across episodes). Frames show env 0 with its drones; its episode number
     is in the file name, since env 0 carries on into a new episode whenever one ends.
     """
+    # Here, not at the top: the envs bring torch and gymnasium, which a fire-only run never needs.
+    from roshan.env.heuristics import POLICIES
+
     _check_steps(steps, every)
     if isinstance(drones, bool) or not isinstance(drones, int | np.integer) or drones < 1:
         raise ValueError(f"--drones: expected a positive number of drones per env, got {drones!r} "
@@ -165,6 +167,8 @@ def run_drone_simulation(cfg: Config, steps: int, drones: int, policy: str = "gr
     renderer = overlay = scratch = None
     if frames_dir is not None or gif is not None:
         frames_dir, scratch = _frames_dir(frames_dir)
+        from roshan.kernels.render import FrameRenderer, drone_overlay
+
         renderer, overlay = FrameRenderer(env.fire), drone_overlay(env.drones, 0)
     result = SimulationResult()
     tally = _EpisodeTally(env)
@@ -205,12 +209,16 @@ def run_drone_simulation(cfg: Config, steps: int, drones: int, policy: str = "gr
 
 
 def _build_fly_env(cfg: Config):
+    from roshan.env.fly import FlyVectorEnv
+
     fly = FlyConfig(policy="complex")
     return FlyVectorEnv(num_envs=cfg.sim.envs, config=cfg, fly=fly, seed=cfg.sim.seed), fly
 
 
 def _fly(env, obs: dict, n: int, policy: str, generator, tally: _EpisodeTally) -> dict:
     """Advance every env ``n`` steps under ``policy``, counting the episodes that end."""
+    from roshan.env.heuristics import policy_actions
+
     for _ in range(n):
         obs, _, _, _, info = env.step(policy_actions(policy, env, obs, generator))
         tally.add(info)
