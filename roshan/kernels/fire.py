@@ -220,8 +220,7 @@ class FireSim:
 
         E, N, R = num_envs, self.num_cells, self.record_capacity
         self.land = ti.field(ti.i32, N)
-        self.land.from_numpy(np.ascontiguousarray(land.classes.reshape(-1), dtype=np.int32))
-        self._alloc_class_table(land)
+        class_ints, class_floats = self._alloc_class_table(land)
         # Cell records, (E, R): record r of env e is cell r (dense) or cell (r & 63) of its block slot r >> 6.
         self.cells = ti.Vector.field(CELL_FIELDS, ti.i32, (E, R))
         self.timers = _grouped_vector_field(ti.f64, (E, R), TIMER_GROUPS)
@@ -246,11 +245,11 @@ class FireSim:
         self.normals = ti.field(ti.f32, rng.TABLE_SIZE)
         self.unit = ti.Vector.field(2, ti.f32, rng.TABLE_SIZE)
         q, q_angles = rng.normal_quantiles(0x5EED, 0xA11CE)
-        self.normals.from_numpy(q)
         angles = 2.0 * np.pi * q_angles.astype(np.float64)
-        self.unit.from_numpy(np.stack([np.cos(angles), np.sin(angles)], axis=1).astype(np.float32))
-        self.episode.fill(-1)
+        self._load_tables(np.ascontiguousarray(land.classes.reshape(-1), dtype=np.int32), class_ints, class_floats,
+                          q, np.stack([np.cos(angles), np.sin(angles)], axis=1).astype(np.float32))
         self._all = np.ones(E, dtype=np.int32)
+        self._counts_host = np.zeros((E, N_COUNTS), dtype=np.int32)  # what step() and counters() read into
         self.parallel = choose_parallel(fire.parallel, num_envs, self.num_fires)
         self.chunked = ChunkedStep(self) if self.parallel == "chunks" else None
 
@@ -313,7 +312,8 @@ class FireSim:
         self.pattern = PATTERNS.index(ig.pattern)
         self.reseed = ig.reseed
 
-    def _alloc_class_table(self, land: LandCoverMap) -> None:
+    def _alloc_class_table(self, land: LandCoverMap) -> tuple[np.ndarray, np.ndarray]:
+        """The per-class fields, and their values as (ints, floats) arrays for :meth:`_load_tables`."""
         n = len(CLASSES)
         self.cls_ignitable = ti.field(ti.i32, n)
         self.cls_tau_ign = ti.field(ti.f32, n)
@@ -327,13 +327,29 @@ class FireSim:
         if land.is_uniform:  # the uniform map takes its times from the config (firespin.md 2.2)
             tau_ign[GENERIC_UNBURNED] = self.fire_cfg.uniform_ignition_time
             tau_burn[GENERIC_UNBURNED] = self.fire_cfg.uniform_burning_time
-        self.cls_ignitable.from_numpy(np.array([c.is_ignitable for c in CLASSES], np.int32))
-        self.cls_tau_ign.from_numpy(tau_ign)
-        self.cls_tau_burn.from_numpy(tau_burn)
-        self.cls_n_conv.from_numpy(np.array([c.n_conv for c in CLASSES], np.int32))
-        self.cls_n_rad.from_numpy(np.array([c.n_rad for c in CLASSES], np.int32))
-        self.cls_lr.from_numpy(np.array([(c.lr_min, c.lr_max) for c in CLASSES], np.float32))
-        self.cls_sf.from_numpy(np.array([(c.sf0_mean, c.sf0_std) for c in CLASSES], np.float32))
+        ints = np.array([(c.is_ignitable, c.n_conv, c.n_rad) for c in CLASSES], np.int32)
+        floats = np.array([(c.lr_min, c.lr_max, c.sf0_mean, c.sf0_std) for c in CLASSES], np.float32)
+        return ints, np.column_stack([tau_ign, tau_burn, floats]).astype(np.float32)
+
+    @ti.kernel
+    def _load_tables(self, land: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                     ints: ti.types.ndarray(dtype=ti.i32, ndim=2), floats: ti.types.ndarray(dtype=ti.f32, ndim=2),
+                     normals: ti.types.ndarray(dtype=ti.f32, ndim=1), unit: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        """Every constant table in one launch: a field's ``from_numpy`` builds a kernel of its own per field, ~10 ms
+        each at every start. ``ints``: ignitable, n_conv, n_rad per class; ``floats``: tau_ign, tau_burn, lr_min,
+        lr_max, sf0_mean, sf0_std."""
+        for c in range(self.num_cells):
+            self.land[c] = land[c]
+        for k in range(ints.shape[0]):
+            self.cls_ignitable[k], self.cls_n_conv[k], self.cls_n_rad[k] = ints[k, 0], ints[k, 1], ints[k, 2]
+            self.cls_tau_ign[k], self.cls_tau_burn[k] = floats[k, 0], floats[k, 1]
+            self.cls_lr[k] = ti.Vector([floats[k, 2], floats[k, 3]])
+            self.cls_sf[k] = ti.Vector([floats[k, 4], floats[k, 5]])
+        for t in range(normals.shape[0]):
+            self.normals[t] = normals[t]
+            self.unit[t] = ti.Vector([unit[t, 0], unit[t, 1]])
+        for e in range(self.num_envs):
+            self.episode[e] = -1
 
     # ------------------------------------------------------------------------------------------ public API
 
@@ -353,13 +369,17 @@ class FireSim:
         """The root key of every random stream (a hash of the seed)."""
         return rng.base_key(self.seed)
 
-    def step(self, n: int = 1) -> None:
-        """Advance every env by ``n`` fire updates (n * dt seconds) in one kernel launch."""
+    def step(self, n: int = 1) -> np.ndarray:
+        """Advance every env by ``n`` fire updates (n * dt seconds) in one kernel launch, which also reads the
+        counters at its end: returns them as (E, N_COUNTS) (columns: :data:`STAT_NAMES`; the host array that the
+        next ``step`` or :meth:`counters` overwrites), so that stepping and reading take one launch."""
         check_built_in_this_runtime(self._taichi_generation, "FireSim.step(): this simulator")
-        if n > 0 and self.chunked is not None:
+        if n > 0 and self.chunked is None:
+            self._advance(n, self._counts_host)
+            return self._counts_host
+        if n > 0:
             self.chunked.advance(n)
-        elif n > 0:
-            self._advance(n)
+        return self.counters()
 
     def flood(self, requests, extinguished) -> None:
         """Drop water on cells (firespin.md 8), in order within each env.
@@ -371,14 +391,21 @@ class FireSim:
         requests = self.int32_array(requests, (self.num_envs, None), "flood requests")
         self._flood(requests, self.int32_array(extinguished, requests.shape, "flood output", copy_ok=False))
 
-    def stats(self) -> dict[str, np.ndarray]:
-        """Per-env counters, each an (E,) int array (a host copy: not for the step loop)."""
-        c = self.counts.to_numpy()
+    def counters(self) -> np.ndarray:
+        """Every env's counters now, (E, N_COUNTS) (columns: :data:`STAT_NAMES`), in one launch (a field's
+        ``to_numpy`` costs 4x as much); the host array that the next call or ``step`` overwrites."""
+        self._export_counts(self._counts_host)
+        return self._counts_host
+
+    def stats(self, counters: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Per-env counters, each an (E,) int array (a host copy: not for the step loop); ``counters`` as returned by
+        :meth:`step` saves the read."""
+        c = self.counters() if counters is None else counters
         return {name: c[:, col].copy() for name, col in STAT_NAMES.items()}
 
     def lit_counts(self) -> np.ndarray:
         """(E,) distinct cells lit since each env's reset (burning, burned out or extinguished since)."""
-        return self.counts.to_numpy()[:, N_LIT].copy()
+        return self.counters()[:, N_LIT].copy()
 
     def state(self, env: int = 0) -> np.ndarray:
         """Cell states of one env as a (rows, cols) int32 array (class id, or 12/13/14 burning/burned/flooded)."""
@@ -414,7 +441,7 @@ class FireSim:
 
     def steps_since_reset(self) -> np.ndarray:
         """(E,) fire updates each env has made since its last reset."""
-        return self.counts.to_numpy()[:, N_STEP].copy()
+        return self.counters()[:, N_STEP].copy()
 
     def wind_vectors(self) -> np.ndarray:
         """(E, 2) wind velocity (m/s) along (rows, cols)."""
@@ -756,12 +783,21 @@ class FireSim:
     # ------------------------------------------------------------------------------------------ one update
 
     @ti.kernel
-    def _advance(self, n_steps: ti.i32):
+    def _advance(self, n_steps: ti.i32, counters: ti.types.ndarray(dtype=ti.i32, ndim=2)):
         for v in range(self.num_envs * self.env_pad):
             if v % self.env_pad == 0:
                 e = v // self.env_pad
                 for _ in range(n_steps):
                     self._step_env(e)
+                for k in ti.static(range(N_COUNTS)):  # the read a caller makes next, in the same launch
+                    counters[e, k] = self.counts[e, k]
+
+    @ti.kernel
+    def _export_counts(self, counters: ti.types.ndarray(dtype=ti.i32, ndim=2)):
+        ti.loop_config(serialize=True)  # a few ints per env: no thread-pool dispatch
+        for e in range(self.num_envs):
+            for k in ti.static(range(N_COUNTS)):
+                counters[e, k] = self.counts[e, k]
 
     @ti.func
     def _step_env(self, e):

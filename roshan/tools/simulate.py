@@ -19,6 +19,7 @@ import numpy as np
 from roshan.config import Config, ConfigError, FlyConfig, replace, to_dict
 from roshan.io import prepare_output, write_atomic, write_gif, writing
 from roshan.kernels.fire import FireSim
+from roshan.kernels.fire_records import N_STEP
 from roshan.maps import load_map
 from roshan.runtime import init_taichi
 
@@ -46,10 +47,12 @@ def build_sim(cfg: Config) -> FireSim:
     return FireSim(land, cfg.fire, cfg.wind, cfg.ignition, num_envs=cfg.sim.envs, seed=cfg.sim.seed)
 
 
-def record(sim: FireSim) -> dict:
-    """One series record: the step and, per env, the counts of SERIES_KEYS."""
-    stats = sim.stats()
-    step = int(sim.steps_since_reset()[0])
+def record(sim: FireSim, counters: np.ndarray | None = None) -> dict:
+    """One series record: the step and, per env, the counts of SERIES_KEYS (from ``counters``, as
+    ``FireSim.step`` returns them, when given: no further read)."""
+    c = sim.counters() if counters is None else counters
+    stats = sim.stats(c)
+    step = int(c[0, N_STEP])
     rec = {"step": step, "time_s": round(step * sim.dt, 6)}
     rec.update({k: stats[k].tolist() for k in SERIES_KEYS})
     return rec
@@ -87,8 +90,7 @@ def run_simulation(cfg: Config, steps: int, every: int = 100, frames_dir: Path |
     while done < steps:
         n = min(every, steps - done)
         t1 = time.perf_counter()
-        sim.step(n)
-        rec = record(sim)  # the host copy also waits for the kernel, so the timing is honest
+        rec = record(sim, sim.step(n))  # the step returns the counters it read: the timing is honest
         sim_seconds += time.perf_counter() - t1
         done += n
         result.series.append(rec)
