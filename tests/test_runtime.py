@@ -91,3 +91,41 @@ def test_float_arithmetic_is_evaluated_as_written():
     np.testing.assert_array_equal(out[1], (big + y) - big)
     np.testing.assert_array_equal(out[2], x / y)
     np.testing.assert_array_equal(out[3], np.float32(1.0) / np.sqrt(np.abs(z)))
+
+
+def test_a_kernel_compile_error_still_names_its_file_and_line():
+    """The start-up patch replaces Taichi's per-node caret diagrams with "File, line, function" and the source line:
+    an error in a kernel must still say where."""
+    runtime.ensure_taichi()
+    assert ti.lang.ast.ast_transformer_utils.ASTTransformerContext.get_pos_info is runtime._plain_position
+
+    @ti.kernel
+    def broken() -> ti.i32:
+        return undefined_name  # noqa: F821
+
+    with pytest.raises(Exception) as err:
+        broken()
+    text = str(err.value)
+    assert f'File "{__file__}"' in text and "in broken" in text and "return undefined_name" in text
+
+
+def test_kernel_sources_are_looked_up_once_and_class_kernels_still_recognised():
+    from taichi.lang import kernel_impl
+
+    runtime.ensure_taichi()
+    assert kernel_impl._inside_class is runtime._inside_class
+    assert hasattr(kernel_impl.getsourcelines, "uncached")
+
+    @ti.data_oriented
+    class Counter:
+        def __init__(self):
+            self.n = ti.field(ti.i32, ())
+
+        @ti.kernel
+        def bump(self, k: ti.i32):
+            self.n[None] += k
+
+    c = Counter()
+    c.bump(2)
+    c.bump(3)  # a class kernel taken for a free function would raise instead
+    assert c.n[None] == 5
