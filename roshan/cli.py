@@ -403,7 +403,7 @@ def experiment():
 
 EXPERIMENT_STORAGE = click.option(
     "--storage", default=None, help="SQLAlchemy URL (postgresql://user:password@host/db) shared by machines, or a "
-                                    "journal file (default: ROOT/NAME/experiment.journal).")
+                                    "journal file (default: the spec's storage, else ROOT/NAME/experiment.journal).")
 BUDGET = click.option("--budget", type=click.Choice(["local", "thesis"]), default="local", show_default=True,
                       help="The spec's budgets for this machine, or the thesis's own (each condition's thesis_set; "
                            "a separate experiment, NAME-thesis-budget).")
@@ -432,7 +432,7 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
                    threads):
     """Train and evaluate every (condition, seed) of SPEC; run it again to continue after a crash (finished runs
     are kept, a killed one continues from its checkpoint); machines sharing --storage split the runs."""
-    from roshan.experiment.runner import default_storage, run_experiment, run_worker
+    from roshan.experiment.runner import run_experiment, run_worker, spec_storage
     from roshan.experiment.spec import load_spec
     from roshan.study.trial import local_values
 
@@ -441,7 +441,7 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
         chosen = spec.select(only)
         extra = tuple(f"{k}={v}" for k, v in local_values(arch, threads).items())
         if worker:
-            url = storage or default_storage(root, spec.name)
+            url = spec_storage(spec, root, storage)
             sys.exit(run_worker(spec, url, root, heartbeat=heartbeat, max_retry=max_retry, extra=extra, only=chosen))
         args = (["--arch", arch] if arch else []) + (["--threads", str(threads)] if threads else [])
         run_experiment(spec, root, storage, workers, args, heartbeat, max_retry, echo=click.echo, only=chosen)
@@ -460,20 +460,20 @@ def experiment_report(spec_path, budget, storage, root, out_dir):
     """Thesis-style tables of SPEC's finished runs (mean ± std (median) over seeds beside the thesis's values),
     per-seed rows (CSV, JSON) and a plot."""
     from roshan.experiment.report import markdown, write_report
-    from roshan.experiment.runner import default_storage, experiment_dir, load_experiment, progress
+    from roshan.experiment.runner import experiment_dir, load_experiment, progress, spec_storage
     from roshan.experiment.spec import load_spec
     from roshan.study.storage import open_storage
 
     with reported():
         spec = load_spec(spec_path, budget)
-        url = storage or default_storage(root, spec.name)
-        if not storage and not Path(url).is_file():
+        url = spec_storage(spec, root, storage)
+        if "://" not in url and not Path(url).is_file():
             raise FileNotFoundError(f"{url}: no experiment journal; run `roshan experiment run {spec_path}` first "
                                     "(or give --storage / --root)")
         study = load_experiment(open_storage(url, heartbeat=None, repair=False), spec.name)
         out = Path(out_dir) if out_dir else experiment_dir(root, spec.name) / "report"
         rows = write_report(spec, study, out)
-    p = progress(study)
+    p = progress(study, set(spec.fingerprints()))
     click.echo(f"experiment {spec.name}: {p['done']}/{len(spec.runs())} runs done, {p['running']} running, "
                f"{p['waiting']} waiting" + (f", {p['failed']} failed" if p["failed"] else ""))
     click.echo(markdown(spec, rows))

@@ -70,6 +70,12 @@ def default_storage(root: str | Path, name: str) -> str:
     return str((experiment_dir(root, name) / JOURNAL_NAME).resolve())
 
 
+def spec_storage(spec: Spec, root: str | Path, storage: str | None = None) -> str:
+    """Where ``spec``'s runs are recorded: ``--storage``, else the spec's own ``storage`` (a committed journal),
+    else ``ROOT/NAME/experiment.journal``."""
+    return storage or spec.storage or default_storage(root, spec.name)
+
+
 def run_dir(root: str | Path, name: str, run: Run) -> Path:
     return experiment_dir(root, name) / run.condition.name / f"seed_{run.seed}"
 
@@ -95,11 +101,27 @@ def prepare_experiment(storage, spec: Spec, echo: Callable[[str], None] = print)
         stored = _wait_for_meta(study)
         check_runs(spec, stored, study)
         study.set_user_attr(STUDY_ATTR, {"spec": spec.path, "runs": {**stored["runs"], **prints}})
+    drop_orphans(study, spec, echo)
     queued = {run_key(t) for t in study.get_trials(deepcopy=False) if t.state != TrialState.FAIL}
     for key in prints:
         if key not in queued:
             study.enqueue_trial({}, user_attrs={RUN_ATTR: key})
     return study
+
+
+def drop_orphans(study: optuna.Study, spec: Spec, echo: Callable[[str], None] = print) -> int:
+    """Fail the waiting runs of conditions ``spec`` no longer has (a condition removed or renamed), so that they are
+    neither run nor counted; a spec that still has them queues them again. Returns how many were dropped."""
+    keys = set(spec.fingerprints())
+    storage = study._storage
+    orphans = [t for t in storage.get_all_trials(study._study_id, deepcopy=False, states=(TrialState.WAITING,))
+               if run_key(t) not in keys]
+    for t in orphans:
+        storage.set_trial_user_attr(t._trial_id, "dropped", f"not in {spec.path}")
+        storage.set_trial_state_values(t._trial_id, state=TrialState.FAIL)
+    if orphans:
+        echo(f"experiment {spec.name}: dropped {len(orphans)} waiting run(s) of conditions {spec.path} no longer has")
+    return len(orphans)
 
 
 def check_runs(spec: Spec, stored: dict, study: optuna.Study) -> None:
@@ -376,7 +398,7 @@ def run_experiment(spec: Spec, root: str | Path = "runs", storage: str | None = 
     """``roshan experiment run``: create or continue the experiment and run its waiting runs with ``workers``
     processes on this machine (only the runs of the conditions ``only`` names, when given: the whole spec is
     still created, so other runs keep their place for a later call); returns the study."""
-    url = storage or default_storage(root, spec.name)
+    url = spec_storage(spec, root, storage)
     store = open_storage(url, heartbeat, max_retry, repair=True, echo=echo)
     study = prepare_experiment(store, spec, echo)
     keys = {r.key for r in spec.runs(only)}

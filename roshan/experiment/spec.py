@@ -125,6 +125,7 @@ class Spec:
     path: str
     budget: str
     conditions: tuple[Condition, ...]
+    storage: str | None = None  # where its runs are recorded unless --storage says otherwise
 
     def runs(self, only: tuple[str, ...] = ()) -> list[Run]:
         """Every (condition, seed), in the spec's order: conditions first, then seeds."""
@@ -309,9 +310,14 @@ def load_spec(path: str | Path, budget: str = "local") -> Spec:
         raise SpecError(f"{path}: not valid YAML ({exc})") from None
     if not isinstance(raw, dict) or not isinstance(raw.get("conditions"), dict) or not raw["conditions"]:
         raise SpecError(f"{path}: expected a mapping with a non-empty 'conditions' mapping")
-    unknown = set(raw) - {"name", "seeds", "eval", "conditions", "note"}
+    unknown = set(raw) - {"name", "seeds", "eval", "conditions", "note", "storage"}
     if unknown:
-        raise SpecError(f"{path}: unknown key(s) {', '.join(sorted(unknown))}; expected name, seeds, eval, conditions")
+        raise SpecError(f"{path}: unknown key(s) {', '.join(sorted(unknown))}; expected name, seeds, eval, storage, "
+                        "conditions")
+    storage = raw.get("storage")
+    if storage is not None and (not isinstance(storage, str) or not storage.strip()):
+        raise SpecError(f"{path}: storage: expected a journal file (relative to the working directory) or a URL, "
+                        f"got {storage!r}")
     name = str(raw.get("name") or path.stem) + ("" if budget == "local" else "-thesis-budget")
     if not _NAME.match(name):
         raise SpecError(f"{path}: name {name!r} may hold letters, digits, '_', '-' and '.' only")
@@ -321,4 +327,4 @@ def load_spec(path: str | Path, budget: str = "local") -> Spec:
     for k, v in raw["conditions"].items():
         expanded[str(k)] = _inherit(str(k), v, expanded, str(path))
         conditions.append(_condition(str(k), expanded[str(k)], defaults, path.parent, budget, str(path)))
-    return Spec(name, str(path), budget, tuple(conditions))
+    return Spec(name, str(path), budget, tuple(conditions), storage)

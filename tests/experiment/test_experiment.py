@@ -262,6 +262,40 @@ def test_a_spec_may_grow_but_not_change_a_started_run(tmp_path):
     start(spec_path, tmp_path)  # greedy has not started: it may change
 
 
+def test_waiting_runs_of_a_removed_condition_are_dropped_and_a_spec_that_has_them_queues_them_again(tmp_path):
+    spec_path = write_spec(tmp_path)
+    _, url, study = start(spec_path, tmp_path)
+    full = spec_path.read_text()
+    spec_path.write_text(full[: full.index("  more_seeds:")] + full[full.index("  greedy:"):])
+    spec, _, study = start(spec_path, tmp_path)  # more_seeds is gone from the spec
+    assert progress(study, set(spec.fingerprints())) == {"done": 0, "running": 0, "waiting": 3, "failed": 0}
+    assert progress(study)["waiting"] == 3  # the three orphans no longer wait
+    dropped = [t for t in study.get_trials(deepcopy=False) if "dropped" in t.user_attrs]
+    assert sorted(run_key(t) for t in dropped) == ["more_seeds/seed_11", "more_seeds/seed_5", "more_seeds/seed_7"]
+    spec_path.write_text(full)
+    _, _, study = start(spec_path, tmp_path)  # a spec that has them (another machine's) queues them again
+    assert progress(study)["waiting"] == 6
+
+
+def test_a_spec_names_its_storage_and_the_report_finds_it_from_any_root(tmp_path):
+    """The thesis spec names its committed journal, so the README's report command works on a fresh clone."""
+    journal = tmp_path / "committed" / "experiment.journal"
+    journal.parent.mkdir()
+    spec_path = write_spec(tmp_path, SPEC.replace("name: demo", f"name: demo\nstorage: {journal}"))
+    spec = load_spec(spec_path)
+    assert spec.storage == str(journal)
+    assert load_spec(REPO / "configs" / "experiments" / "thesis.yaml").storage == \
+        "benchmarks/results/thesis/experiment.journal"
+    study = prepare_experiment(open_storage(str(journal), heartbeat=60), spec)
+    run_worker(spec, str(journal), tmp_path, execute=recording_execute(tmp_path / "log"))
+    out = subprocess.run([sys.executable, "-m", "roshan", "experiment", "report", str(spec_path), "--root",
+                          str(tmp_path / "elsewhere"), "--out", str(tmp_path / "report")],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert "experiment demo: 1/6 runs done" in out.stdout
+    assert (tmp_path / "report" / "report.md").is_file() and progress(study)["done"] == 1
+
+
 def test_only_runs_the_chosen_conditions_and_leaves_the_rest_queued(tmp_path):
     spec, url, study = start(write_spec(tmp_path), tmp_path)
     assert spec.select(("more_*", "greedy")) == ("more_seeds", "greedy")
