@@ -20,6 +20,8 @@ from roshan.kernels.fire import FireSim
 from roshan.maps import load_map
 
 MODELS = Path(__file__).resolve().parents[1] / "models"
+PINNED_FLIER = Path(__file__).resolve().parent / "data" / "fly_collision_v1"  # not the shipped one: a new model
+                                                                                # must not change the pins
 
 # fire_*: recorded on f14bffa (before the redesign). The others re-recorded once when Taichi's fast math was turned
 # off (issue 35: its approximate reciprocals made the FlyAgent kernels CPU-specific); an Intel AVX-512 Xeon gave the
@@ -99,7 +101,7 @@ def planner_hash(controller: str) -> str:
     """PlannerVectorEnv in evaluation (explorers fly) over the shipped FlyAgents: seeded random candidates for the
     planner, the heuristic for greedy; 400 decisions of 5 low-level steps."""
     cfg = Config(ignition=IgnitionConfig(fire_percentage=0.02), drones=DroneConfig(num_drones=3))
-    pc = PlannerConfig(fly_model=str(MODELS / "fly_collision"), explorer_model=str(MODELS / "fly_simple"),
+    pc = PlannerConfig(fly_model=str(PINNED_FLIER), explorer_model=str(MODELS / "fly_simple"),
                        num_explorers=4)
     env = PlannerVectorEnv(3, cfg, pc, evaluation=True, controller=controller, seed=2)
     g = torch.Generator().manual_seed(3)
