@@ -19,7 +19,7 @@ import os
 import shlex
 import socket
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import torch
@@ -67,30 +67,45 @@ def resolve_checkpoint(target: str | Path, which: str = "best") -> Path:
     raise FileNotFoundError(f"{target}: no checkpoints/{which}.pt or checkpoints/latest.pt in this run folder")
 
 
+def newest_checkpoint(run_dir: str | Path) -> Path | None:
+    """The checkpoint a resume continues from: ``latest``, or, in a run that lost it, the most recently written of
+    the others (each holds the whole state of its update); None if the run has no checkpoint."""
+    latest = checkpoint_path(run_dir, "latest")
+    if latest.is_file():
+        return latest
+    others = [p for which in CHECKPOINTS if (p := checkpoint_path(run_dir, which)).is_file()]
+    return max(others, key=lambda p: p.stat().st_mtime_ns, default=None)
+
+
 class RunBusy(RuntimeError):
     """Another process is training in this run folder."""
 
 
 @contextlib.contextmanager
-def run_lock(run_dir: str | Path) -> Iterator[None]:
-    """Hold ``run_dir/.lock`` while training in it: a second process (a second ``--resume``) is refused with
-    who holds it instead of both writing checkpoints and event files. The lock dies with its process (flock),
-    so a killed run never leaves the folder locked."""
-    path = Path(run_dir) / ".lock"
+def folder_lock(path: str | Path, busy: Callable[[str], Exception]) -> Iterator[None]:
+    """Hold the lock file ``path`` while this process writes what it guards; where another process holds it,
+    raise ``busy(holder)`` (holder: "pid N on HOST: COMMAND") before anything is written. The lock dies with its
+    process (flock), so a killed process never leaves it held."""
     fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
         holder = os.pread(fd, 4096, 0).decode(errors="replace").strip() or "another process"
         os.close(fd)
-        raise RunBusy(f"{run_dir}: a process is training in this run folder ({holder}); wait for it or stop it "
-                      "first") from None
+        raise busy(holder) from None
     try:
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"pid {os.getpid()} on {socket.gethostname()}: {shlex.join(sys.argv)}\n".encode(), 0)
         yield
     finally:
         os.close(fd)  # releases the lock
+
+
+def run_lock(run_dir: str | Path) -> contextlib.AbstractContextManager[None]:
+    """Hold ``run_dir/.lock`` while training in it: a second process (a second ``--resume``) is refused with
+    who holds it (:class:`RunBusy`) instead of both writing checkpoints and event files."""
+    return folder_lock(Path(run_dir) / ".lock", lambda holder: RunBusy(
+        f"{run_dir}: a process is training in this run folder ({holder}); wait for it or stop it first"))
 
 
 # ------------------------------------------------------------------------------------------------ checkpoints

@@ -36,6 +36,13 @@ def writing(what: str, path: str | os.PathLike) -> Iterator[None]:
         raise OutputError(what, path, exc) from exc
 
 
+def refuse_overwrite(path: str | os.PathLike | None, what: str, replace: bool) -> None:
+    """Refuse (:class:`OutputError`) to overwrite the existing file ``path`` unless ``replace`` (a command's
+    ``--replace``). Commands call it before any work, so that a refused command touches nothing."""
+    if path is not None and not replace and Path(path).is_file():
+        raise OutputError(what, path, "the file exists; give --replace to overwrite it, or name a new file")
+
+
 def prepare_output(path: str | os.PathLike, what: str, is_dir: bool = True) -> Path:
     """Make sure ``path`` (a folder, or with ``is_dir=False`` a file) can be written before the work that fills
     it starts: missing folders are created and a probe file is created and removed in the folder (permission

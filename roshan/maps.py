@@ -25,6 +25,8 @@ import rasterio.windows
 from rasterio.crs import CRS
 from rasterio.errors import CRSError, NotGeoreferencedWarning, RasterioError, WindowError
 
+from roshan.io import refuse_overwrite
+
 __all__ = [
     "BURNED",
     "BURNING",
@@ -594,6 +596,7 @@ def crop_map(
     out: str | Path,
     bounds_crs: str | None = None,
     band: int | None = None,
+    replace: bool = False,
 ) -> LandCoverMap:
     """Cut a window out of a (possibly huge) land-cover GeoTIFF and write it as a new GeoTIFF.
 
@@ -606,6 +609,7 @@ def crop_map(
         bounds_crs: CRS of ``bounds`` (e.g. ``"EPSG:4326"``, lon/lat order); transformed to the
             raster's CRS when it differs.
         band: 1-based band of a multi-band source (single-band sources need none).
+        replace: overwrite an existing ``out``; without it an existing file is refused before anything is read.
 
     Returns:
         The cropped map, read back and validated by :func:`read_geotiff`.
@@ -613,12 +617,14 @@ def crop_map(
     Raises:
         MapError: If the source is unreadable or not north-up with square cells, the bounds are invalid,
             outside the raster or smaller than a pixel, or the crop holds invalid class values.
+        OutputError: If ``out`` exists and ``replace`` is not set.
     """
     src_path, out_path = Path(src), Path(out)
     if not src_path.exists():
         raise MapError(f"{src_path}: file not found")
     if out_path.exists() and out_path.resolve() == src_path.resolve():
         raise MapError(f"{src_path}: output path equals the source; choose another file")
+    refuse_overwrite(out_path, "the cropped map", replace)
     try:
         with rasterio.open(src_path) as ds:
             band = _select_band(src_path, ds.count, band)

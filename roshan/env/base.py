@@ -23,6 +23,8 @@ from roshan.kernels.pool import FlySims, PlannerSims
 from roshan.maps import LandCoverMap, load_map
 from roshan.runtime import check_built_in_this_runtime, ensure_taichi, taichi_generation, torch_device
 
+CLOSED = -1  # the runtime generation of a closed env: never Taichi's, so step's one comparison catches it
+
 
 class VectorEnvCore(gym.vector.VectorEnv):
     """E environments of one level as one Gymnasium vector env whose tensors are shared with torch.
@@ -47,7 +49,8 @@ class VectorEnvCore(gym.vector.VectorEnv):
 
     def __init__(self, num_envs: int, config: Config | None, seed: int | None, render_mode: str | None):
         ensure_taichi()
-        self._taichi_generation = taichi_generation()  # step/reset refuse to run on a reset runtime
+        # step/reset/render refuse to run on a reset runtime, or after close() (which sets it to CLOSED)
+        self._taichi_generation = taichi_generation()
         self.config = cfg = config or Config()
         self.render_mode = render_mode
         self.num_envs = num_envs
@@ -126,7 +129,7 @@ class VectorEnvCore(gym.vector.VectorEnv):
     @torch.no_grad()
     def step(self, actions):
         """Advance every env by one step; envs that end are reset in the same call."""
-        if self._taichi_generation != taichi_generation():  # inline test: this is the hot path
+        if self._taichi_generation != taichi_generation():  # inline test: this is the hot path (closed envs too)
             self._check_runtime("step()")
         if not self._has_reset:
             raise gym.error.ResetNeeded(f"{type(self).__name__}.step() before reset(): call reset() first")
@@ -143,6 +146,10 @@ class VectorEnvCore(gym.vector.VectorEnv):
         return self._obs, self._rewards, self.terminations, self.truncations, info
 
     def _check_runtime(self, call: str) -> None:
+        if self._taichi_generation == CLOSED:  # its simulators went back to the pool and may be another env's now
+            raise gym.error.ClosedEnvironmentError(
+                f"{type(self).__name__}.{call}: this env was closed (its simulators may belong to another env "
+                "now); build a new one")
         check_built_in_this_runtime(self._taichi_generation, f"{type(self).__name__}.{call}: this env")
 
     def _actions_tensor(self, actions, want: tuple[int, ...], axes: str) -> torch.Tensor:
@@ -176,6 +183,9 @@ class VectorEnvCore(gym.vector.VectorEnv):
                 f"t = {steps * self.config.fire.dt:.1f} s | fires left {burning}")
 
     def close(self, **kwargs):
-        """Give the simulators back to the pool (idempotent); the env must not be stepped afterwards."""
+        """Give the simulators back to the pool (idempotent); step, reset and render raise
+        ``gymnasium.error.ClosedEnvironmentError`` afterwards."""
+        self._taichi_generation = CLOSED
+        self.closed = True
         self._viewer.close()
         self._give_back_sims()

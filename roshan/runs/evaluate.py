@@ -19,12 +19,12 @@ from tqdm import tqdm
 from roshan.algos.buffers import ReplayBuffer
 from roshan.algos.frozen import check_setting, load_agent, policy_fn
 from roshan.algos.networks import flatten_drones
-from roshan.checkpoints import resolve_checkpoint
+from roshan.checkpoints import folder_lock, resolve_checkpoint
 from roshan.config import apply_overrides
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import straight_to_goal
 from roshan.episode import EPISODE_FIELDS, FIRE_FIELDS, REASONS, RECORD_FIELDS
-from roshan.io import OutputError, prepare_output, write_gif, writing
+from roshan.io import OutputError, prepare_output, refuse_overwrite, write_gif, writing
 from roshan.runs.collect import next_observation
 from roshan.runs.envs import make_env
 from roshan.runs.provenance import code_version, settings_hash
@@ -184,20 +184,37 @@ def _refuse_existing(what: str, path: Path, held: str, way_out: str) -> None:
     raise OutputError(what, path, f"it already holds {held}; give --replace to overwrite it, or {way_out}")
 
 
+def output_lock(out_dir: Path):
+    """Hold ``out_dir/.lock`` while an evaluation writes there: a second evaluation into the same folder is refused
+    (:class:`OutputError` naming who holds it) before it clears or writes anything, instead of both writing and the
+    folder keeping one of them. Creates ``out_dir`` if needed."""
+    prepare_output(out_dir, "evaluation files")
+    return folder_lock(out_dir / ".lock", lambda holder: OutputError(
+        "evaluation files", out_dir, f"another evaluation is writing there ({holder}); wait for it, or give --out "
+                                     "DIR to write a new folder"))
+
+
+def _refuse_held(out_dir: Path, json_path: Path | None, frames_dir: Path | None, gif_path: Path | None) -> None:
+    """Without --replace: refuse a folder that holds an evaluation, an existing JSON or GIF file or a frames folder
+    with frames (:class:`OutputError` naming it and the two ways out)."""
+    if held := held_results(out_dir):
+        _refuse_existing("evaluation files", out_dir, f"an evaluation ({', '.join(held)})",
+                         "--out DIR to write a new folder")
+    for what, path, flag in (("the evaluation JSON", json_path, "--json"), ("the GIF", gif_path, "--gif")):
+        if path is not None and Path(path).is_file():
+            _refuse_existing(what, path, "a file of that name", f"{flag} FILE naming a new file")
+    if frames_dir is not None and any(Path(frames_dir).glob("frame_*.png")):
+        _refuse_existing("frames", frames_dir, "frames", "--frames DIR naming a new folder")
+
+
 def prepare_outputs(out_dir: Path, json_path: Path | None, frames_dir: Path | None, gif_path: Path | None,
                     replace: bool = False) -> None:
     """Create the evaluation's output folders and check they can be written before any episode runs. Without
     ``replace``, a folder that holds an evaluation, an existing JSON or GIF file or a frames folder with frames
-    is refused (:class:`OutputError` naming it and the two ways out); with it, the old evaluation's files go."""
+    is refused (:class:`OutputError` naming it and the two ways out); with it, the old evaluation's files go.
+    Call it holding :func:`output_lock`, so that what it clears is no other evaluation's."""
     if not replace:
-        if held := held_results(out_dir):
-            _refuse_existing("evaluation files", out_dir, f"an evaluation ({', '.join(held)})",
-                             "--out DIR to write a new folder")
-        for what, path, flag in (("the evaluation JSON", json_path, "--json"), ("the GIF", gif_path, "--gif")):
-            if path is not None and Path(path).is_file():
-                _refuse_existing(what, path, "a file of that name", f"{flag} FILE naming a new file")
-        if frames_dir is not None and any(Path(frames_dir).glob("frame_*.png")):
-            _refuse_existing("frames", frames_dir, "frames", "--frames DIR naming a new folder")
+        _refuse_held(out_dir, json_path, frames_dir, gif_path)
     prepare_output(out_dir, "evaluation files")
     if replace:
         with writing("evaluation files", out_dir):
@@ -306,61 +323,66 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
                     "arch": arch if arch != "cpu" else None}
         out_dir = run_dir / "eval" / evaluation_name(seed, episodes, {k: v for k, v in settings.items() if v})
     out = Path(out_dir)
-    prepare_outputs(out, json_path, frames_dir, gif_path, replace)
-    provenance = _provenance(target, path, which, seed, episodes, E, overrides, baseline, arch)
-    env = make_env(cfg, E, seed, evaluation=True)
-    env.caption_name = f"{env.default_caption_name} model {run_dir.name}"
-    scratch = None
-    if gif_path is not None and frames_dir is None:  # frames only for the GIF: a scratch folder, removed after
-        scratch = tempfile.TemporaryDirectory(prefix="roshan_frames_")
-        frames_dir = Path(scratch.name)
-    eps = run_episodes(env, policy_fn(agent), episodes, seed, frames_dir, progress_bar)
-    base_eps = None
-    if baseline is not None and not env.flat_drones:  # the planner's baselines: greedy, random
-        if baseline not in BASELINES:
-            raise ValueError(f"--baseline: expected one of {', '.join(BASELINES)}, got {baseline!r}")
-        # The heuristic runs in its own env with the same seed and env count: identical fire layouts and wind.
-        base_env = make_env(cfg, E, seed, evaluation=True, controller=baseline) if baseline == "greedy" else env
-        act = planner_random_fn(seed) if baseline == "random" else (lambda obs: torch.zeros(E, env.num_drones))
-        base_eps = run_episodes(base_env, act, episodes, seed, progress_bar=progress_bar)
-    elif baseline is not None:
-        base_eps = run_episodes(env, baseline_fn(baseline, E, env.num_drones, seed), episodes, seed,
-                                progress_bar=progress_bar)
-    env.close()
-    say = _say if progress_bar else _quiet
-    who, reasons, dt = f"{cfg.train.algo} policy", env.failure_reasons, cfg.fire.dt
-    summary = write_outputs(eps, out, f"{run_dir.name} ({path.stem}, {len(eps['time'])} episodes, seed {seed})",
-                            provenance, reasons, dt, who, say)
-    write_learning_curves(run_dir, out / "learning_curves.png", f"{run_dir.name}: {who}", cfg.train.algo, say)
-    payload = flyagent_json(summary, env.failure_reasons)
-    if base_eps is not None:
-        base = write_outputs(base_eps, out / baseline, f"{baseline} baseline ({len(base_eps['time'])} episodes, "
-                                                         f"seed {seed})", provenance, reasons, dt,
-                           f"{baseline} baseline", say)
-        plot_comparison({who: eps, baseline: base_eps}, out, reasons=reasons)
-        payload = {"policy": payload, baseline: flyagent_json(base, env.failure_reasons)}
-        summary["baseline"] = base
-    payload["provenance"] = provenance
-    if json_path is not None:
-        with writing("the evaluation JSON", json_path):
-            Path(json_path).write_text(json.dumps(payload, indent=2) + "\n")
-    if gif_path is not None:
-        say(f"writing the GIF {gif_path}")
-        with writing("the GIF", gif_path):
-            write_gif(sorted(Path(frames_dir).glob("frame_*.png")), Path(gif_path))
-    if scratch is not None:
-        scratch.cleanup()
-    summary["checkpoint"], summary["out_dir"] = str(path), str(out)
-    return summary
+    if not replace:  # refused here, a command creates nothing, not even the folder or its lock
+        _refuse_held(out, json_path, frames_dir, gif_path)
+    with output_lock(out):  # held until the last file is written: a second evaluation here is refused
+        prepare_outputs(out, json_path, frames_dir, gif_path, replace)
+        provenance = _provenance(target, path, which, seed, episodes, E, overrides, baseline, arch)
+        env = make_env(cfg, E, seed, evaluation=True)
+        env.caption_name = f"{env.default_caption_name} model {run_dir.name}"
+        scratch = None
+        if gif_path is not None and frames_dir is None:  # frames only for the GIF: a scratch folder, removed after
+            scratch = tempfile.TemporaryDirectory(prefix="roshan_frames_")
+            frames_dir = Path(scratch.name)
+        eps = run_episodes(env, policy_fn(agent), episodes, seed, frames_dir, progress_bar)
+        base_eps = None
+        if baseline is not None and not env.flat_drones:  # the planner's baselines: greedy, random
+            if baseline not in BASELINES:
+                raise ValueError(f"--baseline: expected one of {', '.join(BASELINES)}, got {baseline!r}")
+            # The heuristic runs in its own env with the same seed and env count: identical fire layouts and wind.
+            base_env = make_env(cfg, E, seed, evaluation=True, controller=baseline) if baseline == "greedy" else env
+            act = planner_random_fn(seed) if baseline == "random" else (lambda obs: torch.zeros(E, env.num_drones))
+            base_eps = run_episodes(base_env, act, episodes, seed, progress_bar=progress_bar)
+        elif baseline is not None:
+            base_eps = run_episodes(env, baseline_fn(baseline, E, env.num_drones, seed), episodes, seed,
+                                    progress_bar=progress_bar)
+        env.close()
+        say = _say if progress_bar else _quiet
+        who, reasons, dt = f"{cfg.train.algo} policy", env.failure_reasons, cfg.fire.dt
+        summary = write_outputs(eps, out, f"{run_dir.name} ({path.stem}, {len(eps['time'])} episodes, seed {seed})",
+                                provenance, reasons, dt, who, say)
+        write_learning_curves(run_dir, out / "learning_curves.png", f"{run_dir.name}: {who}", cfg.train.algo, say)
+        payload = flyagent_json(summary, env.failure_reasons)
+        if base_eps is not None:
+            base = write_outputs(base_eps, out / baseline, f"{baseline} baseline ({len(base_eps['time'])} episodes, "
+                                                             f"seed {seed})", provenance, reasons, dt,
+                               f"{baseline} baseline", say)
+            plot_comparison({who: eps, baseline: base_eps}, out, reasons=reasons)
+            payload = {"policy": payload, baseline: flyagent_json(base, env.failure_reasons)}
+            summary["baseline"] = base
+        payload["provenance"] = provenance
+        if json_path is not None:
+            with writing("the evaluation JSON", json_path):
+                Path(json_path).write_text(json.dumps(payload, indent=2) + "\n")
+        if gif_path is not None:
+            say(f"writing the GIF {gif_path}")
+            with writing("the GIF", gif_path):
+                write_gif(sorted(Path(frames_dir).glob("frame_*.png")), Path(gif_path))
+        if scratch is not None:
+            scratch.cleanup()
+        summary["checkpoint"], summary["out_dir"] = str(path), str(out)
+        return summary
 
 
 @torch.no_grad()
 def save_buffer(target: str | Path, transitions: int, path: Path, seed: int = 0, num_envs: int | None = None,
                 which: str = "best", overrides: list[str] | tuple[str, ...] = (),
-                progress_bar: bool = True) -> str:
+                progress_bar: bool = True, replace: bool = False) -> str:
     """Record ``transitions`` (drone transitions) of the deterministic policy into a replay buffer file (the IQL
     dataset of learning.md 8: raw rewards, per-drone not_done, next observations; the env's ``final_obs`` is
-    the next observation where an episode ended, and only a real terminal sets not_done = 0)."""
+    the next observation where an episode ended, and only a real terminal sets not_done = 0). An existing
+    ``path`` is refused unless ``replace``."""
+    refuse_overwrite(path, "the replay buffer", replace)
     ensure_taichi()
     trained, agent, ckpt = load_agent(target, which, torch_device())
     if trained.train.algo == "planner":

@@ -34,11 +34,12 @@ from roshan.checkpoints import (
     config_of_checkpoint,
     load_checkpoint,
     new_run_dir,
+    newest_checkpoint,
     resolve_checkpoint,
     run_lock,
     save_checkpoint,
 )
-from roshan.config import Config, apply_overrides, dump_config, load_config
+from roshan.config import Config, apply_overrides, dump_config
 from roshan.env.fly import FlyVectorEnv
 from roshan.episode import EPISODE_FIELDS, FAILURES, REASONS
 from roshan.io import OutputError, prepare_output, writing
@@ -220,8 +221,9 @@ class Trainer:
     """One training run in ``run_dir`` (new or resumed)."""
 
     def __init__(self, cfg: Config, run_dir: Path, resume_state: dict | None = None, progress_bar: bool = True,
-                 on_update: Callable[[dict], None] | None = None):
+                 on_update: Callable[[dict], None] | None = None, resumed_from: Path | None = None):
         self.cfg, self.run_dir = cfg, Path(run_dir)
+        self.resumed_from = resumed_from or checkpoint_path(run_dir, "latest")  # the file resume_state came from
         self.progress_bar, self.on_update = progress_bar, on_update
         tc = cfg.train
         if tc.algo in ("ppo", "planner"):
@@ -288,7 +290,7 @@ class Trainer:
 
     def _restore(self, state: dict) -> None:
         # the whole state (optimisers too) is checked first: torch would fail halfway, or at the first step
-        where = str(checkpoint_path(self.run_dir, "latest"))
+        where = str(self.resumed_from)
         check_fits(self.agent, state["agent"], self.cfg, config_of_checkpoint(state, where), where, weights_only=False)
         self.agent.load_state_dict(state["agent"])
         for k, v in state["progress"].items():
@@ -468,52 +470,61 @@ def start_run(cfg: Config, root: str | Path = "runs", name: str | None = None) -
 
 
 def resume_config(run_dir: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Config:
-    """The config a resumed run continues with: its ``latest`` checkpoint's (the truth: ``config.yaml`` may be
-    damaged or stale), plus ``overrides``; ``config.yaml`` only for a run killed before its first checkpoint.
-    The result is written back to ``config.yaml`` so that a later resume keeps these overrides."""
+    """The config a resumed run continues with: its newest checkpoint's (:func:`newest_checkpoint`: the truth,
+    ``config.yaml`` may be damaged or stale), plus ``overrides``. Writes nothing: :func:`train` records the result
+    in ``config.yaml`` once it holds the run's lock, so that a later resume keeps these overrides. A folder without
+    any checkpoint is refused (FileNotFoundError) rather than trained from zero over its files."""
     run_dir = Path(run_dir)
-    latest = checkpoint_path(run_dir, "latest")
-    if latest.is_file():
-        state = load_checkpoint(latest)
-        cfg = apply_overrides(config_of_checkpoint(state, str(latest)), overrides)
-        # before config.yaml takes the overrides: a refused resume leaves the run folder as it was
-        check_fits(make_agent(cfg), state["agent"], cfg, config_of_checkpoint(state, str(latest)), str(latest),
-                   weights_only=False)
-    else:
-        path = run_dir / "config.yaml"
-        if not path.is_file() or not path.read_text().strip():
-            raise FileNotFoundError(f"{run_dir}: nothing to resume from (no checkpoints/latest.pt, and config.yaml "
-                                    "is missing or empty); start the run again from its config")
-        cfg = load_config(path, overrides)
-    if overrides:
-        dump_config(cfg, run_dir / "config.yaml")
+    path = newest_checkpoint(run_dir)
+    if path is None:
+        if not run_dir.is_dir():
+            raise FileNotFoundError(f"{run_dir}: no such run folder to resume")
+        config = run_dir / "config.yaml"
+        start = (f"roshan train {config}" if config.is_file() and config.read_text().strip()
+                 else "roshan train CONFIG")
+        raise FileNotFoundError(f"{run_dir}: no checkpoint to resume from (checkpoints/ holds no latest.pt or "
+                                f"best_*.pt); start a new run instead: {start}")
+    state = load_checkpoint(path)
+    saved = config_of_checkpoint(state, str(path))
+    cfg = apply_overrides(saved, overrides)
+    # the whole state is checked here, before training starts: a refused resume leaves the run folder as it was
+    check_fits(make_agent(cfg), state["agent"], cfg, saved, str(path), weights_only=False)
     return cfg
 
 
-def resume_state(run_dir: Path, cfg: Config) -> dict | None:
-    """The ``latest`` checkpoint of ``run_dir`` after checking it fits ``cfg`` (None if there is none yet)."""
-    path = checkpoint_path(run_dir, "latest")
-    for stale in path.parent.glob(".*.tmp"):  # a write the killed run did not finish; the old file is whole
+def resume_state(run_dir: Path, cfg: Config) -> tuple[dict | None, Path | None]:
+    """The newest checkpoint of ``run_dir`` (:func:`newest_checkpoint`) after checking it fits ``cfg``, and its
+    path; (None, None) if there is none yet. Where it is not ``latest`` one line on stderr says which it is."""
+    latest = checkpoint_path(run_dir, "latest")
+    for stale in latest.parent.glob(".*.tmp"):  # a write the killed run did not finish; the old file is whole
         stale.unlink()
-    if not path.is_file():
-        return None
+    path = newest_checkpoint(run_dir)
+    if path is None:
+        return None, None
     state = load_checkpoint(path)
     check_same_model(cfg, config_of_checkpoint(state, str(path)), str(path))
-    return state
+    if path != latest:
+        print(f"{run_dir}: no checkpoints/latest.pt; resuming from the newest checkpoint, {path} (update "
+              f"{state['progress']['updates']})", file=sys.stderr)
+    return state, path
 
 
 def train(cfg: Config, run_dir: Path, resume: bool = False, progress_bar: bool = True,
           on_update: Callable[[dict], None] | None = None, evaluate_at_end: bool = True) -> dict:
-    """Train one run in ``run_dir`` (continuing from its ``latest`` checkpoint if ``resume``), then evaluate
-    its best checkpoint (``best_eval`` if periodic evaluation ran, else ``best_objective``) on episodes other than
-    the periodic evaluation's, which chose it. Returns the evaluation summary plus the run's counters."""
+    """Train one run in ``run_dir`` (continuing from its newest checkpoint if ``resume`` and it has one; ``cfg``
+    goes to ``config.yaml`` where it differs from that checkpoint's), then evaluate its best checkpoint
+    (``best_eval`` if periodic evaluation ran, else ``best_objective``) on episodes other than the periodic
+    evaluation's, which chose it. Returns the evaluation summary plus the run's counters."""
     ensure_taichi_for(cfg)
     if cfg.train.torch_threads:
         torch.set_num_threads(cfg.train.torch_threads)
     prepare_output(Path(run_dir) / "checkpoints", "checkpoints")  # a read-only run folder fails before training
-    with run_lock(run_dir):
-        state = resume_state(run_dir, cfg) if resume else None
-        trainer = Trainer(cfg, run_dir, state, progress_bar, on_update)
+    with run_lock(run_dir):  # taken before anything is written: a refused process changes nothing
+        state, path = resume_state(run_dir, cfg) if resume else (None, None)
+        trainer = Trainer(cfg, run_dir, state, progress_bar, on_update, resumed_from=path)
+        if state is not None and config_dict(cfg) != config_dict(config_of_checkpoint(state, str(path))):
+            with writing("the run's config", Path(run_dir) / "config.yaml"):  # a later resume keeps the overrides
+                dump_config(cfg, Path(run_dir) / "config.yaml")
         progress = trainer.run()
     result = {"run_dir": str(run_dir), **progress.state_dict(), "train_episodes": trainer.episodes.episodes,
               "stopped_by": trainer.stopped_by}

@@ -17,7 +17,7 @@ from roshan.algos.frozen import check_setting, load_agent, policy_fn
 from roshan.algos.networks import flatten_drones
 from roshan.config import apply_overrides
 from roshan.ggui import open_shown_window
-from roshan.io import prepare_output, write_gif, writing
+from roshan.io import prepare_output, refuse_overwrite, write_gif, writing
 from roshan.runs.envs import make_env
 from roshan.runtime import ensure_taichi, torch_device
 
@@ -30,7 +30,7 @@ def has_display() -> bool:
 @torch.no_grad()
 def watch(target: str | Path, steps: int | None = None, seed: int = 0, which: str = "best", fps: float = 10.0,
           gif_path: Path = Path("watch.gif"), screenshot: Path | None = None,
-          overrides: list[str] | tuple[str, ...] = ()) -> str:
+          overrides: list[str] | tuple[str, ...] = (), replace: bool = False) -> str:
     """Fly the run's policy in one env and show it; returns a line saying what was shown or written.
 
     Args:
@@ -41,7 +41,10 @@ def watch(target: str | Path, steps: int | None = None, seed: int = 0, which: st
         fps: at most this many frames a second in the window.
         gif_path: where env 0's frames go when no window can be shown.
         screenshot: with a window, save its last frame (read back from GGUI) as this PNG.
+        replace: overwrite an existing ``gif_path``; without it the GIF is refused before anything runs.
     """
+    if not has_display():  # the GIF will be written: refuse an existing one before any work
+        refuse_overwrite(gif_path, "the GIF", replace)
     ensure_taichi()
     trained, agent, path = load_agent(target, which, torch_device())
     cfg = apply_overrides(trained, overrides) if overrides else trained
@@ -55,6 +58,7 @@ def watch(target: str | Path, steps: int | None = None, seed: int = 0, which: st
         first = env.render()
         window, why = _try_window(first.shape) if has_display() else (None, "no display (DISPLAY is not set)")
         if window is None:
+            refuse_overwrite(gif_path, "the GIF", replace)  # a display without a window: before the episode
             prepare_output(gif_path, "the GIF", is_dir=False)
             frames = _fly(env, agent, obs, steps, first, stop_at_episode_end=True)
             with writing("the GIF", gif_path):
