@@ -59,6 +59,7 @@ def main():
 @click.option("--gif", type=click.Path(dir_okay=False), default=None, help="Stitch the frames into this GIF.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
               help="Write {config, series, timing} (and drones, with --drones) here.")
+@click.option("--replace", is_flag=True, help="Overwrite existing --gif / --json files (without it they are refused).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--drones", type=int, default=None, metavar="N",
               help="Fly N drones per env (FlyAgent envs, complex policy: drones put out the nearest unreserved "
@@ -70,7 +71,7 @@ def main():
 @ARCH
 @THREADS
 def simulate(config_path, map_name, envs, steps, seed, fire_percentage, clusters, pattern, wind_speed,
-             wind_direction, frames, every, gif, json_path, quiet, drones, policy, sets, arch, threads):
+             wind_direction, frames, every, gif, json_path, replace, quiet, drones, policy, sets, arch, threads):
     """Run the fire model on E envs of a map and summarise (optionally frames, a GIF and a JSON series).
 
     With --drones N every env is a FlyAgent episode whose drones extinguish fires; episodes that end restart
@@ -88,10 +89,15 @@ def simulate(config_path, map_name, envs, steps, seed, fire_percentage, clusters
     with reported():
         cfg = load_config(config_path, overrides)
         sim_mod.prepare_outputs(Path(frames) if frames else None, Path(gif) if gif else None,
-                                Path(json_path) if json_path else None)
-        result = sim_mod.run_simulation(cfg, steps, every, Path(frames) if frames else None,
-                                        Path(gif) if gif else None, progress=not quiet, drones=drones,
-                                        policy=policy or "greedy")
+                                Path(json_path) if json_path else None, replace=replace)
+        frames_path, gif_path = Path(frames) if frames else None, Path(gif) if gif else None
+        if drones is None:  # the fire alone: no envs, no torch (a second less to start)
+            result = sim_mod.run_simulation(cfg, steps, every, frames_path, gif_path, progress=not quiet)
+        else:
+            from roshan.tools.simulate_drones import run_drone_simulation
+
+            result = run_drone_simulation(cfg, steps, drones, policy or "greedy", every, frames_path, gif_path,
+                                          progress=not quiet)
     for line in sim_mod.summary_lines(result):
         click.echo(line)
     if json_path:
@@ -136,12 +142,13 @@ def maps_show(name_or_path, band):
 @click.option("--bounds", nargs=4, type=float, required=True, metavar="W S E N", help="Window to cut out.")
 @click.option("--crs", default=None, help="CRS of --bounds (e.g. EPSG:4326); default: the raster's own.")
 @click.option("--output", "-o", type=click.Path(dir_okay=False), required=True, help="GeoTIFF to write.")
-def maps_crop(source, bounds, crs, output):
+@click.option("--replace", is_flag=True, help="Overwrite an existing --output file (without it it is refused).")
+def maps_crop(source, bounds, crs, output, replace):
     """Cut a window out of a (possibly huge) CLC+ raster, reading only that window."""
     from roshan.maps import crop_map, describe_map
 
     with reported():
-        m = crop_map(source, tuple(bounds), output, bounds_crs=crs)
+        m = crop_map(source, tuple(bounds), output, bounds_crs=crs, replace=replace)
     click.echo(f"wrote {output}")
     click.echo(describe_map(m))
 
@@ -222,8 +229,8 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
               help="Write {episodes, success_rate, failure_rates, tte, provenance} here.")
 @click.option("--replace", is_flag=True,
-              help="Overwrite an evaluation already in the output folder (and --json/--gif/--frames files); "
-                   "without it such outputs are refused.")
+              help="Overwrite an evaluation already in the output folder (and --json/--gif/--frames files, or "
+                   "the --save-buffer FILE); without it such outputs are refused.")
 @click.option("--frames", "frames_dir", type=click.Path(file_okay=False), default=None,
               help="PNG frames of env 0's first episode.")
 @click.option("--gif", "gif_path", type=click.Path(dir_okay=False), default=None, help="GIF of env 0's first episode.")
@@ -256,7 +263,7 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, replace, f
         if save_buffer is not None:
             n, path = save_buffer
             click.echo(ev.save_buffer(target, n, Path(path), seed=seed, num_envs=envs, which=which, overrides=sets,
-                                      progress_bar=not quiet))
+                                      progress_bar=not quiet, replace=replace))
             return
         summary = ev.evaluate_run(target, episodes=episodes, seed=seed, num_envs=envs,
                                   out_dir=Path(out_dir) if out_dir else None,
@@ -286,10 +293,11 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, replace, f
               help="Where the frames go when no window can be shown.")
 @click.option("--screenshot", type=click.Path(dir_okay=False), default=None,
               help="With a window and --steps: save the window's last frame as this PNG.")
+@click.option("--replace", is_flag=True, help="Overwrite an existing --gif file (without it it is refused).")
 @SETS
 @ARCH
 @THREADS
-def watch(target, steps, seed, which, fps, gif_path, screenshot, sets, arch, threads):
+def watch(target, steps, seed, which, fps, gif_path, screenshot, replace, sets, arch, threads):
     """Watch a trained FlyAgent or planner (a run folder or checkpoint) fly, live in a window (like RL-Zoo's
     enjoy); without a display, env 0's first episode is written as a GIF instead."""
     from roshan.runs.watch import watch as run_watch
@@ -298,7 +306,7 @@ def watch(target, steps, seed, which, fps, gif_path, screenshot, sets, arch, thr
     with reported():
         init_taichi(arch or "cpu", threads)
         click.echo(run_watch(target, steps=steps, seed=seed, which=which, fps=fps, gif_path=Path(gif_path),
-                             screenshot=Path(screenshot) if screenshot else None, overrides=sets))
+                             screenshot=Path(screenshot) if screenshot else None, overrides=sets, replace=replace))
 
 
 # ------------------------------------------------------------------------------------------------ study

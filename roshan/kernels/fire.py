@@ -374,8 +374,8 @@ class FireSim:
         counters at its end: returns them as (E, N_COUNTS) (columns: :data:`STAT_NAMES`; the host array that the
         next ``step`` or :meth:`counters` overwrites), so that stepping and reading take one launch."""
         check_built_in_this_runtime(self._taichi_generation, "FireSim.step(): this simulator")
-        if n > 0 and self.chunked is None:
-            self._advance(n, self._counts_host)
+        if self.chunked is None:  # n = 0 only reads the counters (and builds the kernel: a warm-up)
+            self._advance(max(n, 0), self._counts_host)
             return self._counts_host
         if n > 0:
             self.chunked.advance(n)

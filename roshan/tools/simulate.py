@@ -1,8 +1,7 @@
-"""``roshan simulate``: run the fire model on E envs, record a series, optionally dump frames and a GIF.
+"""``roshan simulate``: run the fire model on E envs, record a series, optionally dump frames and a GIF; the
+series, frame, timing and output helpers that :mod:`roshan.tools.simulate_drones` (``--drones N``) shares.
 
-With ``drones=N`` the envs are FlyAgent envs (:class:`~roshan.env.fly.FlyVectorEnv`, complex policy: drones
-extinguish the nearest unreserved fire) flown by a scripted policy of :mod:`roshan.env.heuristics`; one env
-step is one fire update, and envs whose episode ends restart at once (same-step autoreset).
+A fire-only run imports neither the envs nor torch and gymnasium: they cost a second of start-up (issue 34).
 """
 
 from __future__ import annotations
@@ -16,10 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from roshan.config import Config, ConfigError, FlyConfig, replace, to_dict
-from roshan.io import prepare_output, write_atomic, write_gif, writing
+from roshan.config import Config, to_dict
+from roshan.io import prepare_output, refuse_overwrite, write_atomic, write_gif, writing
 from roshan.kernels.fire import FireSim
 from roshan.kernels.fire_records import N_STEP
+from roshan.kernels.render import FrameRenderer
 from roshan.maps import load_map
 from roshan.runtime import init_taichi
 
@@ -59,33 +59,27 @@ def record(sim: FireSim, counters: np.ndarray | None = None) -> dict:
 
 
 def run_simulation(cfg: Config, steps: int, every: int = 100, frames_dir: Path | None = None,
-                   gif: Path | None = None, progress: bool = True, drones: int | None = None,
-                   policy: str = "greedy") -> SimulationResult:
+                   gif: Path | None = None, progress: bool = True) -> SimulationResult:
     """Reset all envs, advance ``steps`` updates in chunks of ``every``, recording stats after each chunk.
 
-    Frames (env 0) are written every ``every`` steps when ``frames_dir`` or ``gif`` is given. ``drones=N``
-    flies N drones per env with ``policy`` (``"greedy"`` or ``"random"``, see :func:`run_drone_simulation`);
-    ``None`` simulates the fire alone.
+    Frames (env 0) are written every ``every`` steps when ``frames_dir`` or ``gif`` is given. The fire alone:
+    :func:`roshan.tools.simulate_drones.run_drone_simulation` flies drones too.
     """
-    if drones is not None:
-        return run_drone_simulation(cfg, steps, drones, policy, every, frames_dir, gif, progress)
-    _check_steps(steps, every)
+    check_steps(steps, every)
     sim = build_sim(cfg)
     renderer = scratch = None
     if frames_dir is not None or gif is not None:
-        frames_dir, scratch = _frames_dir(frames_dir)
-        from roshan.kernels.render import FrameRenderer  # frames only: it brings Pillow and GGUI
-
+        frames_dir, scratch = frames_dir_or_scratch(frames_dir)
         renderer = FrameRenderer(sim)
     result = SimulationResult()
     t0 = time.perf_counter()
     sim.reset()
-    result.series.append(record(sim))
+    result.series.append(record(sim, sim.step(0)))  # step(0) builds the update kernel here, not in the timed loop
     t_reset = time.perf_counter() - t0
     if renderer is not None:
-        result.frames.append(renderer.save_png(frames_dir / _frame_name(0, 0.0)))
+        result.frames.append(renderer.save_png(frames_dir / frame_name(0, 0.0)))
     sim_seconds = 0.0
-    bar = _progress(steps, progress)
+    bar = progress_bar(steps, progress)
     done = 0
     while done < steps:
         n = min(every, steps - done)
@@ -95,7 +89,7 @@ def run_simulation(cfg: Config, steps: int, every: int = 100, frames_dir: Path |
         done += n
         result.series.append(rec)
         if renderer is not None:
-            result.frames.append(renderer.save_png(frames_dir / _frame_name(rec["step"], rec["time_s"])))
+            result.frames.append(renderer.save_png(frames_dir / frame_name(rec["step"], rec["time_s"])))
         if bar is not None:
             bar.update(n)
             # means per env, as in the summary (a sum over envs grows with --envs)
@@ -103,151 +97,22 @@ def run_simulation(cfg: Config, steps: int, every: int = 100, frames_dir: Path |
                              "particles/env": f"{np.mean(rec['convection']) + np.mean(rec['radiation']):.0f}"})
     if bar is not None:
         bar.close()
-    _finish_frames(renderer, result, gif, scratch, progress)
-    result.timing = _timing(steps, cfg.sim.envs, t_reset, sim_seconds, sim.memory_bytes_per_env(), t0)
+    finish_frames(renderer, result, gif, scratch, progress)
+    result.timing = timing(steps, cfg.sim.envs, t_reset, sim_seconds, sim.memory_bytes_per_env(), t0)
     return result
 
 
-class _EpisodeTally:
-    """Per-env running totals of finished episodes, successes and extinguished cells, kept as torch tensors so
-    the step loop never waits on a host copy."""
-
-    def __init__(self, env):
-        import torch  # here, not at the top: fire-only runs never need torch
-
-        self.env = env
-        self.episodes, self.successes, self.extinguished = (
-            torch.zeros(env.num_envs, dtype=torch.int64, device=env.device) for _ in range(3))
-
-    def add(self, info: dict) -> None:
-        # info's tensors are overwritten by the next step, so they are folded in right away.
-        ended = info["_episode_stats"]
-        ep = info["episode_stats"]
-        self.episodes += ended
-        self.successes += ended & (ep["success"] > 0.5)
-        self.extinguished += ended * ep["extinguished"].round().long()
-
-    def record(self, done: int) -> dict:
-        """A series record after ``done`` steps: the fire's SERIES_KEYS plus DRONE_SERIES_KEYS, per env."""
-        fire = self.env.fire
-        stats = fire.stats()
-        rec = {"step": done, "time_s": round(done * fire.dt, 6)}
-        rec.update({k: stats[k].tolist() for k in SERIES_KEYS})
-        current = stats["extinguished"]
-        rec.update(episodes=self.episodes.tolist(), successes=self.successes.tolist(), extinguished=current.tolist(),
-                   extinguished_total=(self.extinguished.cpu().numpy() + current).tolist(),
-                   episode_step=fire.steps_since_reset().tolist())
-        return rec
-
-
-def run_drone_simulation(cfg: Config, steps: int, drones: int, policy: str = "greedy", every: int = 100,
-                         frames_dir: Path | None = None, gif: Path | None = None,
-                         progress: bool = True) -> SimulationResult:
-    """``run_simulation`` with ``drones`` drones per env, each env a FlyVectorEnv episode (complex policy).
-
-    ``policy``: ``"greedy"`` (the greedy baseline: the complex policy's nearest-unreserved-fire goals flown by
-    :func:`~roshan.env.heuristics.straight_to_goal`) or ``"random"`` (uniform actions, seeded by
-    ``cfg.sim.seed``). Records add, per env, :data:`DRONE_SERIES_KEYS`; ``step`` counts the run's steps
-    (every env has made that many, across episodes). Frames show env 0 with its drones; its episode number
-    is in the file name, since env 0 carries on into a new episode whenever one ends.
-    """
-    # Here, not at the top: the envs bring torch and gymnasium, which a fire-only run never needs.
-    from roshan.env.heuristics import POLICIES
-
-    _check_steps(steps, every)
-    if isinstance(drones, bool) or not isinstance(drones, int | np.integer) or drones < 1:
-        raise ValueError(f"--drones: expected a positive number of drones per env, got {drones!r} "
-                         "(leave --drones out to simulate the fire alone)")
-    if policy not in POLICIES:
-        raise ValueError(f"--policy: expected one of {', '.join(POLICIES)}, got {policy!r}")
-    try:
-        cfg = replace(cfg, drones={**to_dict(cfg.drones), "num_drones": int(drones)})
-    except ConfigError as exc:
-        raise ConfigError(f"--drones: {exc}") from exc
-    init_taichi(cfg.sim.arch, cfg.sim.threads or None)
-    env, fly = _build_fly_env(cfg)
-    renderer = overlay = scratch = None
-    if frames_dir is not None or gif is not None:
-        frames_dir, scratch = _frames_dir(frames_dir)
-        from roshan.kernels.render import FrameRenderer, drone_overlay
-
-        renderer, overlay = FrameRenderer(env.fire), drone_overlay(env.drones, 0)
-    result = SimulationResult()
-    tally = _EpisodeTally(env)
-    t0 = time.perf_counter()
-    obs, _ = env.reset()
-    result.series.append(tally.record(0))
-    t_reset = time.perf_counter() - t0
-
-    def save_frame(rec: dict) -> None:
-        if renderer is not None:
-            name = _frame_name(rec["step"], rec["time_s"], episode=rec["episodes"][0])
-            result.frames.append(renderer.save_png(frames_dir / name, overlay=overlay))
-
-    save_frame(result.series[0])
-    step_seconds = 0.0
-    bar = _progress(steps, progress)
-    generator = _generator(cfg.sim.seed, env.device)
-    done = 0
-    while done < steps:
-        n = min(every, steps - done)
-        t1 = time.perf_counter()
-        obs = _fly(env, obs, n, policy, generator, tally)
-        rec = tally.record(done + n)  # host copies wait for the kernels, so the timing is honest
-        step_seconds += time.perf_counter() - t1
-        done += n
-        result.series.append(rec)
-        save_frame(rec)
-        if bar is not None:
-            bar.update(n)
-            bar.set_postfix({"burning/env": f"{np.mean(rec['burning']):.1f}", "episodes": int(np.sum(rec["episodes"]))})
-    if bar is not None:
-        bar.close()
-    env.close()
-    _finish_frames(renderer, result, gif, scratch, progress)
-    result.timing = _timing(steps, cfg.sim.envs, t_reset, step_seconds, env.fire.memory_bytes_per_env(), t0)
-    result.drones = _drone_summary(result.series[-1], int(drones), policy, fly, env.t_max)
-    return result
-
-
-def _build_fly_env(cfg: Config):
-    from roshan.env.fly import FlyVectorEnv
-
-    fly = FlyConfig(policy="complex")
-    return FlyVectorEnv(num_envs=cfg.sim.envs, config=cfg, fly=fly, seed=cfg.sim.seed), fly
-
-
-def _fly(env, obs: dict, n: int, policy: str, generator, tally: _EpisodeTally) -> dict:
-    """Advance every env ``n`` steps under ``policy``, counting the episodes that end."""
-    from roshan.env.heuristics import policy_actions
-
-    for _ in range(n):
-        obs, _, _, _, info = env.step(policy_actions(policy, env, obs, generator))
-        tally.add(info)
-    return obs
-
-
-def _generator(seed: int, device):
-    import torch
-
-    return torch.Generator(device=device).manual_seed(int(seed))
-
-
-def _drone_summary(last: dict, drones: int, policy: str, fly, t_max: int) -> dict:
-    episodes, successes = int(np.sum(last["episodes"])), int(np.sum(last["successes"]))
-    return {"drones": drones, "policy": policy, "fly_policy": fly.policy, "t_max": t_max, "episodes": episodes,
-            "successes": successes, "success_rate": successes / episodes if episodes else None,
-            "extinguished": int(np.sum(last["extinguished_total"]))}
-
-
-def _check_steps(steps: int, every: int) -> None:
+def check_steps(steps: int, every: int) -> None:
     if steps < 0 or every < 1:
         raise ValueError(f"steps must be >= 0 and every >= 1 (got steps={steps}, every={every})")
 
 
-def prepare_outputs(frames_dir: Path | None, gif: Path | None, json_path: Path | None) -> None:
+def prepare_outputs(frames_dir: Path | None, gif: Path | None, json_path: Path | None, replace: bool = False) -> None:
     """Create the output folders and check they can be written before anything is simulated: a run of hours
-    must not end by losing its results to a missing or read-only folder."""
+    must not end by losing its results to a missing or read-only folder. An existing GIF or JSON file is refused
+    unless ``replace`` (before anything is created)."""
+    refuse_overwrite(gif, "the GIF", replace)
+    refuse_overwrite(json_path, "the JSON series", replace)
     if frames_dir is not None:
         prepare_output(frames_dir, "frames")
     if gif is not None:
@@ -256,7 +121,7 @@ def prepare_outputs(frames_dir: Path | None, gif: Path | None, json_path: Path |
         prepare_output(json_path, "the JSON series", is_dir=False)
 
 
-def _frames_dir(frames_dir: Path | None) -> tuple[Path, Path | None]:
+def frames_dir_or_scratch(frames_dir: Path | None) -> tuple[Path, Path | None]:
     """(the folder frames go to, the scratch folder to remove afterwards): ``--frames DIR``, or for a GIF alone
     a temporary folder, so that ``--gif`` leaves nothing but the GIF behind."""
     if frames_dir is not None:
@@ -265,7 +130,7 @@ def _frames_dir(frames_dir: Path | None) -> tuple[Path, Path | None]:
     return scratch, scratch
 
 
-def _finish_frames(renderer, result: SimulationResult, gif: Path | None, scratch: Path | None = None,
+def finish_frames(renderer, result: SimulationResult, gif: Path | None, scratch: Path | None = None,
                    progress: bool = False) -> None:
     if renderer is not None:
         renderer.close()
@@ -282,7 +147,7 @@ def _finish_frames(renderer, result: SimulationResult, gif: Path | None, scratch
                 shutil.rmtree(scratch, ignore_errors=True)
 
 
-def _timing(steps: int, envs: int, t_reset: float, step_seconds: float, memory: int, t0: float) -> dict:
+def timing(steps: int, envs: int, t_reset: float, step_seconds: float, memory: int, t0: float) -> dict:
     env_steps = steps * envs
     return {
         "steps": steps,
@@ -346,13 +211,13 @@ def _drone_lines(d: dict) -> list[str]:
     return lines
 
 
-def _frame_name(step: int, time_s: float, episode: int | None = None) -> str:
+def frame_name(step: int, time_s: float, episode: int | None = None) -> str:
     # Drone runs: env 0 restarts whenever its episode ends, so the name says which episode the frame shows.
     suffix = "" if episode is None else f"_ep{episode:04d}"
     return f"frame_{step:07d}_t{time_s:08.1f}s{suffix}.png"
 
 
-def _progress(total: int, enabled: bool):
+def progress_bar(total: int, enabled: bool):
     if not enabled or total <= 0:
         return None
     from tqdm import tqdm
