@@ -334,6 +334,14 @@ def running_workers(storage, name: str) -> list[dict]:
             if WORKER_ATTR in t.user_attrs]
 
 
+def trial_has_all_params(storage, name: str) -> bool:
+    """A running trial of the study holds a value for every parameter of the space."""
+    if not running_workers(storage, name):
+        return False
+    study = optuna.load_study(study_name=name, storage=storage)
+    return any(len(t.params) == len(SPACE["params"]) for t in study.get_trials(states=(TrialState.RUNNING,)))
+
+
 def run_study_killing_a_worker(tmp_path: Path, name: str, storage_url: str | None):
     """3 trials, 2 workers; once both run a trial, one worker is killed with SIGKILL; the other carries on."""
     args = ["--trials", "3", "--workers", "2"] + (["--storage", storage_url] if storage_url else [])
@@ -389,7 +397,8 @@ def test_a_killed_study_resumes_where_it_stopped(tmp_path):
     try:
         wait_until(journal.exists, proc, log)
         reader = open_storage(str(journal), heartbeat=None)
-        wait_until(lambda: running_workers(reader, "k"), proc, log)
+        # killed once the trial has drawn all its parameters: the retry must ask for the same ones
+        wait_until(lambda: trial_has_all_params(reader, "k"), proc, log)
     finally:
         os.killpg(proc.pid, signal.SIGKILL)  # the launcher and its worker, mid-trial
         proc.wait()
