@@ -400,3 +400,35 @@ conditions:
     again = subprocess.run([*cmd, "run", str(spec), "--root", str(tmp_path / "runs")], env=env,
                            capture_output=True, text=True, timeout=300, cwd=REPO)
     assert again.returncode == 0 and "1/1 runs done, 0 waiting" in again.stdout  # nothing is run twice
+
+
+def fire_layouts(cfg, num_envs: int, seed: int, episodes: int) -> set[bytes]:
+    """The initial fire layouts (burning-cell masks) of the first ``episodes`` episodes of each of ``num_envs`` envs
+    of a FlyVectorEnv built and reset with ``seed``, as the buffer recorder and the evaluation build theirs."""
+    from roshan.env.fly import FlyVectorEnv
+    from roshan.kernels.fire import BURNING
+    env = FlyVectorEnv(num_envs=num_envs, config=cfg, fly=cfg.fly, seed=seed)
+    try:
+        env.reset(seed=seed)
+        layouts = set()
+        for _ in range(episodes):
+            layouts |= {np.packbits(s == BURNING).tobytes() for s in env.fire.states()}
+            env.reset()
+        return layouts
+    finally:
+        env.close()
+
+
+def test_the_e7_buffer_shares_no_fire_layout_with_its_evaluation():
+    """E7 learns offline from a buffer: its episodes must not be the ones it is evaluated on. The buffer's ~200k
+    transitions take ~3 episodes in each of its 50 envs and the evaluation's 200 episodes ~4 in each of 50; 6 each
+    cover both."""
+    from roshan.config import load_config
+    (e7,) = [c for c in load_spec(REPO / "configs" / "experiments" / "thesis.yaml").conditions if c.name == "E7"]
+    cfg = load_config(str(REPO / e7.buffer.model / "config.yaml"))
+    envs = cfg.train.eval_envs  # the recorder's env count (save_buffer) and the evaluation's (eval envs 50)
+    buffer = fire_layouts(cfg, envs, e7.buffer.seed, 6)
+    evaluation = fire_layouts(cfg, envs, e7.eval_seed, 6)
+    assert len(buffer) > 0.95 * envs * 6 and len(evaluation) > 0.95 * envs * 6  # distinct layouts, all lit
+    assert not buffer & evaluation
+    assert fire_layouts(cfg, envs, e7.eval_seed, 2) <= evaluation  # the same seed gives the same layouts
