@@ -273,7 +273,10 @@ def execute_run(run: Run, folder: Path, extra: tuple[str, ...] = (), progress_ba
             dump_config(cfg, folder / "config.yaml")
         trained = train(cfg, folder, resume=True, progress_bar=progress_bar, evaluate_at_end=False)
     episodes, reasons = evaluate(run, cfg, folder)
-    last = evaluate_last(run, cfg, folder, reasons) if cond.trains else None
+    # the thesis reports the training-objective checkpoint; best_eval is a maximum over periodic evaluations
+    others = {key: evaluate_weights(run, cfg, folder, reasons, which)
+              for key, which in (("last", "latest"), ("objective", "best_objective"))
+              if cond.trains and checkpoint_path(folder, which).is_file()}
     ev_dir = folder / "eval" / f"{cond.eval_seed}-{cond.eval_episodes}"
     provenance = {"experiment": str(folder.parent.parent.name), "run": run.key, "config": cond.config,
                   "overrides": [*cond.sets, *extra, f"sim.seed={run.seed}"], "code": code_version()}
@@ -289,19 +292,19 @@ def execute_run(run: Run, folder: Path, extra: tuple[str, ...] = (), progress_ba
         "minutes": round((time.time() - start) / 60.0, 3), "host": socket.gethostname(), "run_dir": str(folder),
         "code": provenance["code"],
     }
-    if last is not None:
-        result["last"] = last
+    result.update(others)
     with writing("the run's result", folder / "result.json"):
         write_atomic(folder / "result.json", (json.dumps(result, indent=2) + "\n").encode())
     return result
 
 
-def evaluate_last(run: Run, cfg: Config, folder: Path, reasons: tuple[str, ...]) -> dict:
-    """The same episodes with the run's last weights (is the last checkpoint as good as the best?): success and
-    failure rates and the TTE median."""
-    summary = summarize(evaluate(run, cfg, folder, "latest")[0], reasons=reasons, dt=cfg.fire.dt)
+def evaluate_weights(run: Run, cfg: Config, folder: Path, reasons: tuple[str, ...], which: str) -> dict:
+    """The same episodes with the run's ``which`` checkpoint (``latest``: are the last weights as good as the best?
+    ``best_objective``: the thesis's rule): success and failure rates, the TTE median and every episode's TTE."""
+    episodes = evaluate(run, cfg, folder, which)[0]
+    summary = summarize(episodes, reasons=reasons, dt=cfg.fire.dt)
     return {"success_rate": summary["success_rate"], "failure_rates": summary["failure_rates"],
-            "tte_median": summary["tte"]["median"]}
+            "tte_median": summary["tte"]["median"], "tte_episodes": [int(t) for t in episodes["time"]]}
 
 
 def evaluate(run: Run, cfg: Config, folder: Path, weights: str = "best") -> tuple[dict, tuple[str, ...]]:

@@ -388,6 +388,9 @@ conditions:
     # One update: the last weights are the best, so the same episodes give the same result.
     assert result["last"]["success_rate"] == result["success_rate"]
     assert result["last"]["failure_rates"] == result["failure_rates"]
+    # ... and the training-objective checkpoint (the thesis's rule) is evaluated on them too
+    assert result["objective"]["tte_episodes"] == result["last"]["tte_episodes"] == result["tte_episodes"]
+    assert result["code"]["commit"] is not None  # which code made the row
     rep = subprocess.run([*cmd, "report", str(spec), "--root", str(tmp_path / "runs")], env=env,
                          capture_output=True, text=True, timeout=300, cwd=REPO)
     assert rep.returncode == 0, rep.stderr[-3000:]
