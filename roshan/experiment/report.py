@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from roshan.experiment.findings import findings_markdown
 from roshan.experiment.runner import RESULT_ATTR, run_key
 from roshan.experiment.spec import Condition, Reference, Spec
 from roshan.io import write_atomic, writing
@@ -41,21 +42,48 @@ def results_of(study) -> dict[str, dict]:
             if t.state.is_finished() and RESULT_ATTR in t.user_attrs}
 
 
+def done_results(spec: Spec, results: dict[str, dict], cond: Condition) -> list[dict]:
+    """The finished runs' results of one condition, in seed order."""
+    return [results[r.key] for r in spec.runs((cond.name,)) if r.key in results]
+
+
+def _figures(done: list[dict]) -> dict:
+    """Each rate's seed statistics and TTE over all episodes of the seeds' results (any weights' results)."""
+    out = {m: seed_stats([rate(r, m) for r in done]) for m in RATES}
+    tte = [t for r in done for t in r.get("tte_episodes", [])]
+    out["tte"] = seed_stats(tte) if tte and all("tte_episodes" in r for r in done) else None
+    return out
+
+
 def condition_rows(spec: Spec, results: dict[str, dict]) -> list[dict]:
-    """One aggregate per condition: seeds done of planned, each rate's seed statistics, TTE over episodes."""
+    """One aggregate per condition: seeds done of planned, each rate's seed statistics, TTE over episodes (best
+    weights), the same figures with the last and the training-objective weights where every seed has them, and
+    the code commits the seeds ran."""
     rows = []
     for cond in spec.conditions:
-        done = [results[r.key] for r in spec.runs((cond.name,)) if r.key in results]
+        done = done_results(spec, results, cond)
         row = {"condition": cond.name, "seeds": len(done), "planned": len(cond.seeds), "thesis": cond.thesis}
         if done:
-            for m in RATES:
-                row[m] = seed_stats([rate(r, m) for r in done])
-            row["tte"] = seed_stats([t for r in done for t in r["tte_episodes"]]) if any(
-                r["tte_episodes"] for r in done) else None
+            row.update(_figures(done))
+            for key in ("last", "objective"):
+                if cond.trains and all(key in r for r in done):
+                    row[key] = _figures([r[key] for r in done])
+            row["commits"] = commits(done)
             row["minutes"] = float(sum(r.get("minutes", 0.0) for r in done))
             row["episodes"] = int(sum(r["episodes"] for r in done))
         rows.append(row)
     return rows
+
+
+def commits(done: list[dict]) -> list[str]:
+    """The short commits of the code that made the results ('+' marks uncommitted changes, '?' an unknown one)."""
+    out = []
+    for r in done:
+        code = r.get("code") or {}
+        c = (code.get("commit") or "?")[:7] + ("+" if code.get("dirty") else "")
+        if c not in out:
+            out.append(c)
+    return out
 
 
 def _cell(ref: Reference | None, digits: int = 1) -> str:
@@ -69,31 +97,51 @@ def _shown_rates(cond: Condition, row: dict) -> list[str]:
     return [m for m in RATES if m == "success" or m in cond.thesis or (m in row and row[m].mean > 0)]
 
 
-def markdown(spec: Spec, rows: list[dict]) -> str:
-    """A table per condition group: ours beside the thesis's, mean ± std (median)."""
+def _code(row: dict) -> str:
+    c = row.get("commits") or []
+    return c[0] if len(c) == 1 else f"mixed: {', '.join(c)}"
+
+
+def markdown(spec: Spec, rows: list[dict], results: dict[str, dict] | None = None) -> str:
+    """A table per condition group: ours (best, last and training-objective weights) beside the thesis's, mean ±
+    std (median), with the commit of the code that made each row; then the thesis's findings, judged."""
     out = [f"Experiment `{spec.name}` ({spec.path}, budget {spec.budget}). Rates in % of evaluation episodes, "
            "mean ± std (median) over seeds (std: ddof = 0); TTE in low-level steps over all evaluation episodes of "
-           "all seeds.", "",
-           "| condition | seeds | metric | ours | thesis |", "|---|---|---|---|---|"]
+           "all seeds. *best*: the weights of the best periodic evaluation (selected on other episodes); *last*: "
+           "the last weights; *objective*: the best training-objective checkpoint, the thesis's rule ('-': not "
+           "recorded for every seed; runs made before it was evaluated have none). *code*: the commit each row's "
+           "seeds ran ('mixed' when they differ, '+' uncommitted changes).", "",
+           "| condition | seeds | code | metric | ours: best | last | objective | thesis |",
+           "|---|---|---|---|---|---|---|---|"]
     for cond, row in zip(spec.conditions, rows, strict=True):
         seeds = f"{row['seeds']}/{row['planned']}"
         if not row["seeds"]:
-            out.append(f"| {cond.name} | {seeds} | - | not run yet | - |")
+            out.append(f"| {cond.name} | {seeds} | | - | not run yet | | | - |")
             continue
         metrics = _shown_rates(cond, row) + (["tte"] if row.get("tte") is not None else [])
         for i, m in enumerate(metrics):
-            ours = _cell(row.get(m), 0 if m == "tte" else 1)
+            digits = 0 if m == "tte" else 1
+            cells = [_cell(row.get(m), digits)] + [_cell((row.get(k) or {}).get(m), digits)
+                                                    for k in ("last", "objective")]
             ref = str(cond.thesis[m]) if m in cond.thesis else "-"
             label = "TTE (steps)" if m == "tte" else f"{m} %"
-            out.append(f"| {cond.name if i == 0 else ''} | {seeds if i == 0 else ''} | {label} | {ours} | {ref} |")
-    return "\n".join(out) + "\n"
+            first = i == 0
+            out.append(f"| {cond.name if first else ''} | {seeds if first else ''} | {_code(row) if first else ''} "
+                       f"| {label} | {' | '.join(cells)} | {ref} |")
+    text = "\n".join(out) + "\n"
+    if results is not None and spec.findings:
+        by_condition = {c.name: done_results(spec, results, c) for c in spec.conditions}
+        seeds = {c.name: (row["seeds"], row["planned"]) for c, row in zip(spec.conditions, rows, strict=True)}
+        text += findings_markdown(spec.findings, by_condition, seeds)
+    return text
 
 
 def per_seed_csv(spec: Spec, results: dict[str, dict]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["condition", "seed", "episodes", *[f"{m}_pct" for m in RATES], "tte_mean", "tte_median",
-                "last_success_pct", "updates", "env_steps", "train_minutes", "minutes", "host"])
+                "last_success_pct", "objective_success_pct", "updates", "env_steps", "train_minutes", "minutes", "host",
+                "commit"])
     for run in spec.runs():
         r = results.get(run.key)
         if r is None:
@@ -103,9 +151,10 @@ def per_seed_csv(spec: Spec, results: dict[str, dict]) -> str:
         w.writerow([run.condition.name, run.seed, r["episodes"], *[f"{rate(r, m):.2f}" for m in RATES],
                     f"{np.mean(tte):.1f}" if tte else "", f"{np.median(tte):.1f}" if tte else "",
                     f"{100 * r['last']['success_rate']:.2f}" if "last" in r else "",
+                    f"{100 * r['objective']['success_rate']:.2f}" if "objective" in r else "",
                     train.get("updates", ""), train.get("env_steps", ""),
                     f"{train['seconds'] / 60:.2f}" if "seconds" in train else "", f"{r.get('minutes', 0):.2f}",
-                    r.get("host", "")])
+                    r.get("host", ""), commits([r])[0]])
     return buf.getvalue()
 
 
@@ -115,7 +164,7 @@ def _plain(row: dict) -> dict:
         if isinstance(v, Reference):
             out[k] = vars(v)
         elif isinstance(v, dict):
-            out[k] = {m: vars(ref) for m, ref in v.items()}
+            out[k] = {m: None if ref is None else vars(ref) for m, ref in v.items()}
         else:
             out[k] = v
     return out
@@ -161,7 +210,7 @@ def write_report(spec: Spec, study, out_dir: str | Path) -> list[dict]:
         row["_points"] = [rate(results[r.key], "success") for r in spec.runs((cond.name,)) if r.key in results]
     with writing("the experiment report", out):
         out.mkdir(parents=True, exist_ok=True)
-        write_atomic(out / "report.md", markdown(spec, rows).encode())
+        write_atomic(out / "report.md", markdown(spec, rows, results).encode())
         write_atomic(out / "per_seed.csv", per_seed_csv(spec, results).encode())
         summary = [_plain({k: v for k, v in r.items() if not k.startswith("_")}) for r in rows]
         write_atomic(out / "summary.json", (json.dumps(summary, indent=2) + "\n").encode())

@@ -21,6 +21,10 @@ A spec is a YAML file::
       E1_ppo_long:
         base: E1_ppo                             # E1_ppo's keys (not its note); `set`, `thesis_set` and `eval`
         set: {train.total_steps: 540672}         # merged key by key, this condition's values winning
+    findings:                                    # the thesis's claims, judged in the report (findings.py)
+      - claim: a longer run succeeds more often
+        source: Table 5.1
+        holds: [E1_ppo_long.success > E1_ppo.success]
 
 Expanded, every (condition, seed) is one run, keyed ``<condition>/seed_<s>``; its config is the condition's with
 ``sim.seed`` = s. A condition's evaluation plays the same episodes for every seed (the env seed is the spec's).
@@ -42,6 +46,7 @@ import yaml
 
 from roshan.config import Config, apply_overrides, load_config
 from roshan.config.schema import to_dict
+from roshan.experiment.findings import Finding, parse_findings
 
 CONTROLLERS = ("policy", "greedy")
 BUDGETS = ("local", "thesis")
@@ -126,6 +131,7 @@ class Spec:
     budget: str
     conditions: tuple[Condition, ...]
     storage: str | None = None  # where its runs are recorded unless --storage says otherwise
+    findings: tuple[Finding, ...] = ()  # the thesis's claims, judged in the report
 
     def runs(self, only: tuple[str, ...] = ()) -> list[Run]:
         """Every (condition, seed), in the spec's order: conditions first, then seeds."""
@@ -310,10 +316,10 @@ def load_spec(path: str | Path, budget: str = "local") -> Spec:
         raise SpecError(f"{path}: not valid YAML ({exc})") from None
     if not isinstance(raw, dict) or not isinstance(raw.get("conditions"), dict) or not raw["conditions"]:
         raise SpecError(f"{path}: expected a mapping with a non-empty 'conditions' mapping")
-    unknown = set(raw) - {"name", "seeds", "eval", "conditions", "note", "storage"}
+    unknown = set(raw) - {"name", "seeds", "eval", "conditions", "note", "storage", "findings"}
     if unknown:
         raise SpecError(f"{path}: unknown key(s) {', '.join(sorted(unknown))}; expected name, seeds, eval, storage, "
-                        "conditions")
+                        "conditions, findings")
     storage = raw.get("storage")
     if storage is not None and (not isinstance(storage, str) or not storage.strip()):
         raise SpecError(f"{path}: storage: expected a journal file (relative to the working directory) or a URL, "
@@ -327,4 +333,8 @@ def load_spec(path: str | Path, budget: str = "local") -> Spec:
     for k, v in raw["conditions"].items():
         expanded[str(k)] = _inherit(str(k), v, expanded, str(path))
         conditions.append(_condition(str(k), expanded[str(k)], defaults, path.parent, budget, str(path)))
-    return Spec(name, str(path), budget, tuple(conditions), storage)
+    try:
+        findings = parse_findings(raw.get("findings"), {c.name for c in conditions}, str(path))
+    except ValueError as exc:
+        raise SpecError(str(exc)) from None
+    return Spec(name, str(path), budget, tuple(conditions), storage, findings)

@@ -17,7 +17,8 @@ import numpy as np
 import optuna
 import pytest
 
-from roshan.experiment.report import condition_rows, markdown, rate
+from roshan.experiment.findings import verdict
+from roshan.experiment.report import condition_rows, done_results, markdown, per_seed_csv, rate
 from roshan.experiment.runner import STUDY_ATTR, check_runs, prepare_experiment, progress, run_key, run_worker
 from roshan.experiment.spec import Reference, SpecError, load_spec
 from roshan.study.storage import open_storage
@@ -165,7 +166,8 @@ def fake_result(run) -> dict:
     """A result as execute_run returns it, with a success rate that depends on the seed."""
     return {"run": run.key, "condition": run.condition.name, "seed": run.seed, "episodes": 4, "eval_seed": 9,
             "success_rate": 0.25 * (run.seed % 5), "failure_rates": {"timeout": 1 - 0.25 * (run.seed % 5)},
-            "tte": {}, "tte_episodes": [100 + run.seed, 200], "minutes": 0.0}
+            "tte": {}, "tte_episodes": [100 + run.seed, 200], "minutes": 0.0,
+            "code": {"version": "0.1", "commit": "abcdef0123456789", "dirty": False}}
 
 
 def recording_execute(log: Path, pause: float = 0.0):
@@ -356,9 +358,68 @@ def test_report_is_mean_std_median_over_seeds_beside_the_thesis(tmp_path):
     assert rows["greedy"]["seeds"] == 0 and rows["fast"]["seeds"] == 2
     assert rate(results["fast/seed_1"], "success") == 25.0
     table = markdown(spec, list(rows.values()))
-    assert "| fast | 2/2 | success % | 12.5 ± 12.5 (12.5) | 91.15 ± 17.46 (100) |" in table
-    assert "| greedy | 0/1 | - | not run yet | - |" in table
+    assert "| fast | 2/2 | abcdef0 | success % | 12.5 ± 12.5 (12.5) | - | - | 91.15 ± 17.46 (100) |" in table
+    assert "| greedy | 0/1 | | - | not run yet | | | - |" in table
     assert "collision %" not in table.split("| more_seeds")[0]  # fast never collided: no collision row
+
+
+def test_report_shows_last_and_objective_weights_and_which_code_made_each_row(tmp_path):
+    spec = load_spec(write_spec(tmp_path))
+    results = {r.key: fake_result(r) for r in spec.runs() if r.condition.name == "fast"}
+    for r in results.values():  # last: 50 % and TTE 300, 400 in both seeds; objective in seed 0 only
+        r["last"] = {"success_rate": 0.5, "failure_rates": {"timeout": 0.5}, "tte_median": 350.0,
+                     "tte_episodes": [300, 400]}
+    results["fast/seed_0"]["objective"] = results["fast/seed_0"]["last"]
+    results["fast/seed_1"]["code"] = {"commit": "1234567890", "dirty": True}
+    table = markdown(spec, condition_rows(spec, results))
+    assert ("| fast | 2/2 | mixed: abcdef0, 1234567+ | success % | 12.5 ± 12.5 (12.5) | 50.0 ± 0.0 (50.0) | - "
+            "| 91.15 ± 17.46 (100) |") in table
+    assert "|  |  |  | TTE (steps) | 150 ± 50 (150) | 350 ± 50 (350) | - | - |" in table
+    assert "fast,0,4,0.00,0.00,0.00,100.00,0.00,150.0,150.0,50.00,50.00,,,,0.00,,abcdef0" in per_seed_csv(spec, results)
+
+
+FINDINGS = """
+findings:
+  - claim: more seeds succeed more
+    source: Table X
+    holds: [more_seeds.success > fast.success]
+  - claim: fast ends early
+    source: Table Y
+    holds: [fast.success >= 0, fast.tte_median < 150]
+  - claim: greedy wins
+    holds: [greedy.success > fast.success]
+"""
+
+
+def test_findings_are_judged_from_the_figures_with_each_set_of_weights(tmp_path):
+    spec = load_spec(write_spec(tmp_path, SPEC + FINDINGS))
+    results = {r.key: fake_result(r) for r in spec.runs() if r.condition.name != "greedy"}
+    for r in results.values():
+        r["last"] = {"success_rate": 0.0, "failure_rates": {}, "tte_median": 100.0, "tte_episodes": [100]}
+    results["more_seeds/seed_5"]["last"]["success_rate"] = 0.75  # mean over 0.75, 0, 0 = 25 % > fast's 0 %
+    by_cond = {c.name: done_results(spec, results, c) for c in spec.conditions}
+    more, early, greedy = spec.findings
+    # best: more_seeds 25 % (0, 50, 25) > fast 12.5 %; fast's TTE median over 100, 200, 101, 200 is 150.5
+    assert verdict(more, by_cond, "best") == ("confirmed", ["more_seeds.success 25.0 > fast.success 12.5"])
+    v, shown = verdict(early, by_cond, "best")
+    assert v == "contradicted" and shown[1] == "fast.tte_median 150.5 < 150.0 (fails)"
+    assert verdict(early, by_cond, "last")[0] == "confirmed"  # last weights: TTE 100
+    assert verdict(more, by_cond, "objective")[0] == "untested"  # no seed has objective weights
+    assert verdict(greedy, by_cond, "best") == ("untested", ["greedy.success > fast.success: no figure"])
+    text = markdown(spec, condition_rows(spec, results), results)
+    assert "- **fast ends early** (Table Y)" in text and "  - best: **contradicted**" in text
+    assert "- **greedy wins** ()" in text and "seeds short: greedy 0/1" in text
+
+
+@pytest.mark.parametrize("check, message", [
+    ("fast.success >> 3", "is not a check"),
+    ("nope.success > 3", "no condition 'nope'"),
+    ("fast.speed > 3", "unknown figure 'speed'"),
+])
+def test_a_bad_finding_is_refused_naming_it(tmp_path, check, message):
+    text = SPEC + f"findings:\n  - claim: c\n    holds: ['{check}']\n"
+    with pytest.raises(SpecError, match=rf"spec.yaml: findings\[0\].holds: .*{message}"):
+        load_spec(write_spec(tmp_path, text))
 
 
 # ------------------------------------------------------------------------------------------ a real run
