@@ -105,21 +105,23 @@ def figure(results: list[dict], name: str, weights: str) -> float | None:
 
 def verdict(finding: Finding, by_condition: dict[str, list[dict]], weights: str) -> tuple[str, list[str]]:
     """``confirmed`` / ``contradicted`` / ``untested`` with ``weights``, and each check with its figures."""
-    shown, outcomes = [], []
+    shown, outcomes, missing = [], [], []
     for c in finding.checks:
         lhs = figure(by_condition.get(c.condition, []), c.figure, weights)
         rhs = c.number if c.other is None else figure(by_condition.get(c.other, []), c.other_figure, weights)
         if lhs is None or rhs is None:
             outcomes.append(None)
-            shown.append(f"{c}: no figure")
+            missing += [n for n, v in ((c.condition, lhs), (c.other, rhs)) if v is None and n not in missing]
             continue
         ok = _OPS[c.op](lhs, rhs)
         outcomes.append(ok)
         other = "" if c.other is None else f"{c.other}.{c.other_figure} "
         shown.append(f"{c.condition}.{c.figure} {lhs:.1f} {c.op} {other}{rhs:.1f}" + ("" if ok else " (fails)"))
+    if missing:
+        shown.append(f"no figures yet for {', '.join(missing)}")
     if any(o is False for o in outcomes):
         return "contradicted", shown
-    return ("untested" if any(o is None for o in outcomes) else "confirmed"), shown
+    return ("untested" if missing else "confirmed"), shown
 
 
 def findings_markdown(findings: tuple[Finding, ...], by_condition: dict[str, list[dict]],
@@ -135,7 +137,10 @@ def findings_markdown(findings: tuple[Finding, ...], by_condition: dict[str, lis
         names = sorted({c.condition for c in f.checks} | {c.other for c in f.checks if c.other})
         short = [f"{n} {seeds[n][0]}/{seeds[n][1]}" for n in names if seeds[n][0] < seeds[n][1]]
         out.append(f"- **{f.claim}** ({f.source})" + (f"; seeds short: {', '.join(short)}" if short else ""))
+        judged: dict[tuple, list[str]] = {}  # weights that reach the same verdict on the same figures share a line
         for w in WEIGHTS:
             v, shown = verdict(f, by_condition, w)
-            out.append(f"  - {w}: **{v}**: " + "; ".join(shown))
+            judged.setdefault((v, tuple(shown)), []).append(w)
+        for (v, shown), weights in judged.items():
+            out.append(f"  - {', '.join(weights)}: **{v}**: " + "; ".join(shown))
     return "\n".join(out) + "\n"

@@ -405,10 +405,12 @@ def test_findings_are_judged_from_the_figures_with_each_set_of_weights(tmp_path)
     assert v == "contradicted" and shown[1] == "fast.tte_median 150.5 < 150.0 (fails)"
     assert verdict(early, by_cond, "last")[0] == "confirmed"  # last weights: TTE 100
     assert verdict(more, by_cond, "objective")[0] == "untested"  # no seed has objective weights
-    assert verdict(greedy, by_cond, "best") == ("untested", ["greedy.success > fast.success: no figure"])
+    assert verdict(greedy, by_cond, "best") == ("untested", ["no figures yet for greedy"])
     text = markdown(spec, condition_rows(spec, results), results)
     assert "- **fast ends early** (Table Y)" in text and "  - best: **contradicted**" in text
     assert "- **greedy wins** ()" in text and "seeds short: greedy 0/1" in text
+    assert "  - best, last: **untested**: no figures yet for greedy\n" in text  # one line: the same verdict
+    assert "  - objective: **untested**: no figures yet for greedy, fast\n" in text
 
 
 @pytest.mark.parametrize("check, message", [
