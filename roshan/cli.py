@@ -432,11 +432,14 @@ BUDGET = click.option("--budget", type=click.Choice(["local", "thesis"]), defaul
 @click.option("--only", multiple=True, metavar="CONDITION",
               help="Run only these conditions (names or shell patterns such as 'E2_*'; repeat for more); the "
                    "others stay queued for a later call or another machine.")
+@click.option("--rerun", multiple=True, metavar="CONDITION",
+              help="Run these conditions' finished runs once more with the code here now (names or patterns; "
+                   "the newest result is reported, earlier ones stay in the journal).")
 @click.option("--worker", is_flag=True, hidden=True)
 @click.option("--slot", type=click.IntRange(min=0), default=0, hidden=True)
 @ARCH
 @THREADS
-def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbeat, only, worker, slot, arch,
+def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbeat, only, rerun, worker, slot, arch,
                    threads):
     """Train and evaluate every (condition, seed) of SPEC; run it again to continue after a crash (finished runs
     are kept, a killed one continues from its checkpoint); machines sharing --storage split the runs."""
@@ -452,7 +455,8 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
             url = spec_storage(spec, root, storage)
             sys.exit(run_worker(spec, url, root, heartbeat=heartbeat, max_retry=max_retry, extra=extra, only=chosen))
         args = (["--arch", arch] if arch else []) + (["--threads", str(threads)] if threads else [])
-        run_experiment(spec, root, storage, workers, args, heartbeat, max_retry, echo=click.echo, only=chosen)
+        run_experiment(spec, root, storage, workers, args, heartbeat, max_retry, echo=click.echo, only=chosen,
+                       rerun=spec.select(rerun, "--rerun") if rerun else ())
     click.echo(f"report: roshan experiment report {spec_path}" + (f" --budget {budget}" if budget != "local" else "")
                + (f" --storage {storage}" if storage else "") + (f" --root {root}" if root != "runs" else ""))
 

@@ -59,6 +59,7 @@ from roshan.study.workers import Launcher
 STUDY_ATTR = "roshan_experiment"  # study user attribute: {"spec": path, "runs": {key: fingerprint}}
 RESULT_ATTR = "result"  # trial user attribute: the run's result dict
 RUN_ATTR = "run"  # trial user attribute: the run's key, set when it is queued (a retry inherits it)
+RERUN_ATTR = "rerun_of"  # trial user attribute: the finished trial a rerun supersedes (a retry inherits it)
 JOURNAL_NAME = "experiment.journal"
 
 
@@ -122,6 +123,25 @@ def drop_orphans(study: optuna.Study, spec: Spec, echo: Callable[[str], None] = 
     if orphans:
         echo(f"experiment {spec.name}: dropped {len(orphans)} waiting run(s) of conditions {spec.path} no longer has")
     return len(orphans)
+
+
+def queue_reruns(study: optuna.Study, spec: Spec, patterns: tuple[str, ...],
+                 echo: Callable[[str], None] = print) -> int:
+    """Queue the finished runs of the conditions ``patterns`` names once more, to be made by the code that runs
+    them now (in a folder of their own); the newest result of a run is the one reported, the earlier ones stay in
+    the journal. A run whose rerun is already queued or running is left alone. Returns how many were queued."""
+    newest: dict[str, optuna.trial.FrozenTrial] = {}
+    for t in study.get_trials(deepcopy=False):
+        if run_key(t) is not None:
+            newest[run_key(t)] = t  # trials come in number order
+    queued = 0
+    for run in spec.runs(spec.select(patterns)):
+        t = newest.get(run.key)
+        if t is not None and t.state == TrialState.COMPLETE:
+            study.enqueue_trial({}, user_attrs={RUN_ATTR: run.key, RERUN_ATTR: t.number})
+            queued += 1
+    echo(f"experiment {spec.name}: {queued} finished run(s) of {', '.join(patterns)} queued again")
+    return queued
 
 
 def check_runs(spec: Spec, stored: dict, study: optuna.Study) -> None:
@@ -193,8 +213,10 @@ def claim(study: optuna.Study, order: dict[str, int]) -> tuple[optuna.Trial, str
 
 def _taken_elsewhere(study: optuna.Study, trial: optuna.Trial, key: str) -> bool:
     """Another live or finished trial holds the same run (a second guard: the queue has each run once)."""
-    return any(t.number != trial.number and run_key(t) == key and t.state in (TrialState.RUNNING, TrialState.COMPLETE)
-               for t in study.get_trials(deepcopy=False))
+    superseded = study._storage.get_trial(trial._trial_id).user_attrs.get(RERUN_ATTR, -1)
+    return any(t.number != trial.number and run_key(t) == key and (
+        t.state == TrialState.RUNNING or (t.state == TrialState.COMPLETE and t.number > superseded))
+        for t in study.get_trials(deepcopy=False))
 
 
 Execute = Callable[[Run, Path], dict]
@@ -223,6 +245,9 @@ def run_worker(spec: Spec, storage_url: str, root: str | Path, execute: Execute 
         return 0
     run = runs[key]
     folder = run_dir(root, spec.name, run)
+    rerun_of = study._storage.get_trial(trial._trial_id).user_attrs.get(RERUN_ATTR)
+    if rerun_of is not None:  # a fresh folder: the first run's checkpoints would only be evaluated again
+        folder = folder.with_name(f"{folder.name}.rerun-{rerun_of}")
     execute = execute or (lambda r, d: execute_run(r, d, extra=extra))
     try:
         with get_heartbeat_thread(trial._trial_id, storage):
@@ -396,14 +421,17 @@ class ExperimentLauncher(Launcher):
 
 def run_experiment(spec: Spec, root: str | Path = "runs", storage: str | None = None, workers: int = 1,
                    worker_args: list[str] | tuple = (), heartbeat: int | None = 60, max_retry: int | None = 3,
-                   echo: Callable[[str], None] = print, poll: float = 1.0, only: tuple[str, ...] = ()
-                   ) -> optuna.Study:
+                   echo: Callable[[str], None] = print, poll: float = 1.0, only: tuple[str, ...] = (),
+                   rerun: tuple[str, ...] = ()) -> optuna.Study:
     """``roshan experiment run``: create or continue the experiment and run its waiting runs with ``workers``
     processes on this machine (only the runs of the conditions ``only`` names, when given: the whole spec is
-    still created, so other runs keep their place for a later call); returns the study."""
+    still created, so other runs keep their place for a later call), after queueing the finished runs of the
+    conditions ``rerun`` names again; returns the study."""
     url = spec_storage(spec, root, storage)
     store = open_storage(url, heartbeat, max_retry, repair=True, echo=echo)
     study = prepare_experiment(store, spec, echo)
+    if rerun:
+        queue_reruns(study, spec, rerun, echo)
     keys = {r.key for r in spec.runs(only)}
     p = progress(study, keys)
     total = len(keys)

@@ -137,13 +137,13 @@ class Spec:
         """Every (condition, seed), in the spec's order: conditions first, then seeds."""
         return [Run(c, s) for c in self.conditions if not only or c.name in only for s in c.seeds]
 
-    def select(self, patterns: tuple[str, ...]) -> tuple[str, ...]:
+    def select(self, patterns: tuple[str, ...], option: str = "--only") -> tuple[str, ...]:
         """The names of the conditions that match any of ``patterns`` (names or shell patterns such as ``E2_*``),
         in the spec's order; () for no patterns (every condition). A pattern that matches nothing is an error."""
         names = [c.name for c in self.conditions]
         for p in patterns:
             if not fnmatch.filter(names, p):
-                raise SpecError(f"{self.path}: --only {p!r} matches no condition; it has {', '.join(names)}")
+                raise SpecError(f"{self.path}: {option} {p!r} matches no condition; it has {', '.join(names)}")
         return tuple(n for n in names if any(fnmatch.fnmatchcase(n, p) for p in patterns))
 
     def condition(self, name: str) -> Condition:

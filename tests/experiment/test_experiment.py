@@ -18,8 +18,17 @@ import optuna
 import pytest
 
 from roshan.experiment.findings import verdict
-from roshan.experiment.report import condition_rows, done_results, markdown, per_seed_csv, rate
-from roshan.experiment.runner import STUDY_ATTR, check_runs, prepare_experiment, progress, run_key, run_worker
+from roshan.experiment.report import condition_rows, done_results, markdown, per_seed_csv, rate, results_of
+from roshan.experiment.runner import (
+    RERUN_ATTR,
+    STUDY_ATTR,
+    check_runs,
+    prepare_experiment,
+    progress,
+    queue_reruns,
+    run_key,
+    run_worker,
+)
 from roshan.experiment.spec import Reference, SpecError, load_spec
 from roshan.study.storage import open_storage
 
@@ -203,6 +212,29 @@ def start(spec_path, tmp_path):
     url = str(tmp_path / "experiment.journal")
     study = prepare_experiment(open_storage(url, heartbeat=60), spec)
     return spec, url, study
+
+
+def test_a_rerun_makes_finished_runs_again_in_their_own_folders_and_its_result_is_reported(tmp_path):
+    spec, url, study = start(write_spec(tmp_path), tmp_path)
+    log, folders = tmp_path / "log", []
+
+    def execute(run, folder):
+        folders.append(folder.relative_to(tmp_path).as_posix())
+        return recording_execute(log)(run, folder)
+
+    while run_worker(spec, url, tmp_path, execute=execute, only=("fast",)) == 0 and progress(study)["waiting"] > 4:
+        pass
+    first = results_of(study)["fast/seed_1"]
+    assert queue_reruns(study, spec, ("fa*",), echo=lambda _: None) == 2
+    assert queue_reruns(study, spec, ("fast",), echo=lambda _: None) == 0  # already queued: not twice
+    assert progress(study, {"fast/seed_0", "fast/seed_1"}) == {"done": 0, "running": 0, "waiting": 2, "failed": 0}
+    for _ in range(2):
+        assert run_worker(spec, url, tmp_path, execute=execute, only=("fast",)) == 0
+    assert lines(log, "done") == ["fast/seed_0", "fast/seed_1"] * 2  # each made twice: not taken as a duplicate
+    assert folders[2:] == ["demo/fast/seed_0.rerun-0", "demo/fast/seed_1.rerun-1"]  # fresh folders, no resume
+    newest = [t for t in study.get_trials() if t.user_attrs.get(RERUN_ATTR) == 1]
+    assert results_of(study)["fast/seed_1"] == newest[0].user_attrs["result"] == first  # the fake is deterministic
+    assert progress(study, {"fast/seed_0", "fast/seed_1"})["done"] == 2
 
 
 def test_two_workers_sharing_a_storage_never_run_the_same_run_twice(tmp_path):
