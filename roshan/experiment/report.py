@@ -97,6 +97,25 @@ def _shown_rates(cond: Condition, row: dict) -> list[str]:
     return [m for m in RATES if m == "success" or m in cond.thesis or (m in row and row[m].mean > 0)]
 
 
+def compute_line(spec: Spec, rows: list[dict]) -> str:
+    """The spec's wall-clock on the machines that ran it: the finished runs' minutes (training and evaluation,
+    one run per worker), and the runs still to make, estimated at their condition's mean where it has one."""
+    done = sum(r.get("minutes", 0.0) for r in rows)
+    left = unknown = 0
+    est = 0.0
+    for row in rows:
+        missing = row["planned"] - row["seeds"]
+        if missing > 0 and row["seeds"]:
+            est += missing * row["minutes"] / row["seeds"]
+            left += missing
+        elif missing > 0:
+            unknown += missing
+    return (f"Compute: {sum(r['seeds'] for r in rows)} finished runs took {done / 60:.1f} h (one run per worker, "
+            f"summed); the {left} runs still to make of conditions with results take ~{est / 60:.1f} h more at their "
+            f"condition's mean" + (f", and {unknown} runs of conditions without any result are not estimated." if
+                                  unknown else "."))
+
+
 def _code(row: dict) -> str:
     c = row.get("commits") or []
     return c[0] if len(c) == 1 else f"mixed: {', '.join(c)}"
@@ -128,6 +147,7 @@ def markdown(spec: Spec, rows: list[dict], results: dict[str, dict] | None = Non
             first = i == 0
             out.append(f"| {cond.name if first else ''} | {seeds if first else ''} | {_code(row) if first else ''} "
                        f"| {label} | {' | '.join(cells)} | {ref} |")
+    out += ["", compute_line(spec, rows)]
     text = "\n".join(out) + "\n"
     if results is not None and spec.findings:
         by_condition = {c.name: done_results(spec, results, c) for c in spec.conditions}

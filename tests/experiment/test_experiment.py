@@ -410,6 +410,16 @@ def test_report_shows_last_and_objective_weights_and_which_code_made_each_row(tm
     assert "fast,0,4,0.00,0.00,0.00,100.00,0.00,150.0,150.0,50.00,50.00,,,,0.00,,abcdef0" in per_seed_csv(spec, results)
 
 
+def test_the_report_states_the_compute_spent_and_estimates_what_is_left(tmp_path):
+    spec = load_spec(write_spec(tmp_path))
+    results = {"fast/seed_0": {**fake_result(spec.runs(("fast",))[0]), "minutes": 30.0},
+               "more_seeds/seed_5": {**fake_result(spec.runs(("more_seeds",))[0]), "minutes": 60.0}}
+    # fast: 1 of 2 left at 30 min; more_seeds: 2 of 3 left at 60 min; greedy: no result, not estimated
+    assert ("Compute: 2 finished runs took 1.5 h (one run per worker, summed); the 3 runs still to make of "
+            "conditions with results take ~2.5 h more at their condition's mean, and 1 runs of conditions without "
+            "any result are not estimated.") in markdown(spec, condition_rows(spec, results))
+
+
 FINDINGS = """
 findings:
   - claim: more seeds succeed more
