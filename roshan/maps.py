@@ -1,6 +1,6 @@
 """Land-cover maps: the FireSPIN cell-class table, the bundled CLC+ maps, GeoTIFF loading and cropping.
 
-A map is a 2-D grid of cell-class ids (firespin.md sections 2 and 10): row 0 is the northern edge, each
+A map is a 2-D grid of cell-class ids (docs/model/fire.md §2 and §10): row 0 is the northern edge, each
 cell one raster pixel. Maps come from single-band GeoTIFF crops of the Copernicus CLC+ Backbone raster
 (10 m pixels, class ids 1-11, 254 = outside area, 255 = no data), or from the synthetic uniform map
 (all cells of class 16, GENERIC_UNBURNED).
@@ -56,7 +56,7 @@ __all__ = [
 
 MAPS_DIR = Path(__file__).resolve().parent / "data" / "maps"
 
-# Special cell-state ids (firespin.md section 2; the code numbering, not the thesis numbering).
+# Special cell-state ids (docs/model/fire.md §2; the code numbering, not the thesis numbering).
 OUTSIDE_GRID, SEALED, WATER, BURNING, BURNED, FLOODED, OUTSIDE_AREA, GENERIC_UNBURNED = 0, 1, 10, 12, 13, 14, 15, 16
 
 # Ids a map raster may contain once 254/255/nodata have been remapped: the 11 CLC+ classes, outside area
@@ -76,7 +76,7 @@ class MapError(ValueError):
 
 @dataclass(frozen=True)
 class CellClass:
-    """Per-class fire parameters (firespin.md section 2.1).
+    """Per-class fire parameters (docs/model/fire.md §2.1).
 
     Attributes:
         id: Cell-state id (index into :data:`CLASSES`).
@@ -108,7 +108,7 @@ class CellClass:
 
 
 _C = CellClass
-# Reference values of firespin.md 2.1 verbatim (including the unused tau values of states 14 and 16).
+# Reference values of docs/model/fire.md §2.1 verbatim (including the unused tau values of states 14 and 16).
 CLASSES: tuple[CellClass, ...] = (
     _C(0, "Outside grid", False, 0.0, 0.0, 0, 0, 0.0, 0.0, 0.0, 0.0, (0, 0, 0)),
     _C(1, "Sealed", True, 750.0, 15000.0, 1000, 55, 9.0, 10.0, 0.1, 0.0075, (100, 100, 100)),
@@ -162,7 +162,7 @@ class LandCoverMap:
         crs: CRS as a string (e.g. ``"EPSG:3035"``), or None when not georeferenced.
         transform: Affine 6-tuple (a, b, c, d, e, f) mapping (col, row) to CRS coordinates, or None.
         source: File the map was read from, or None.
-        is_uniform: True for the synthetic uniform map (config tau values apply, firespin.md 2.2).
+        is_uniform: True for the synthetic uniform map (config tau values apply, docs/model/fire.md §2.2).
     """
 
     name: str
@@ -312,7 +312,7 @@ def bundled_map_path(name: str) -> Path:
 
 
 def uniform_map(rows: int = 50, cols: int = 50) -> LandCoverMap:
-    """Build the synthetic uniform map (firespin.md 2.2): every cell GENERIC_UNBURNED, 10 m cells.
+    """Build the synthetic uniform map (docs/model/fire.md §2.2): every cell GENERIC_UNBURNED, 10 m cells.
 
     Args:
         rows: Number of rows (the config's ``uniform_ny``).
@@ -503,7 +503,7 @@ def class_histogram(m: LandCoverMap) -> dict[int, int]:
 
 
 def ignitable_fraction(m: LandCoverMap) -> float:
-    """Return the fraction of cells whose class can ignite (firespin.md 2.1, "ign?" column)."""
+    """Return the fraction of cells whose class can ignite (docs/model/fire.md §2.1, "ign?" column)."""
     ignitable = class_arrays()["is_ignitable"]
     return float(ignitable[m.classes].mean())
 

@@ -13,7 +13,7 @@ from rasterio.transform import Affine
 from roshan import maps
 from roshan.maps import MapError
 
-# firespin.md section 10: class counts of the shipped maps.
+# docs/model/fire.md §10: class counts of the shipped maps.
 BUNDLED = {
     "15x15_Woods": ((15, 15), {2: 219, 6: 6}),
     "21x21_Field": ((21, 21), {3: 30, 6: 233, 7: 178}),

@@ -1,4 +1,4 @@
-"""Replay buffer for TD3 and IQL: a ring of preallocated tensors on the learner device (learning.md 5).
+"""Replay buffer for TD3 and IQL: a ring of preallocated tensors on the learner device (docs/model/learning.md §5).
 
 Rows are single transitions; envs x drones are flattened into the row axis, so one buffer holds every drone
 of every env and uniform sampling over it is uniform over all drones' transitions (newest-code sampling).

@@ -1,4 +1,4 @@
-"""FlyAgent action distributions (learning.md 4): Gaussian with clipping, and the tanh-squashed Gaussian."""
+"""FlyAgent action distributions (docs/model/learning.md §4): Gaussian with clipping, and the tanh-squashed Gaussian."""
 
 import math
 
@@ -76,7 +76,7 @@ class TanhNormal:
     # The "raw" interface: a learner stores the pre-tanh sample u and computes log p exactly from it. Inverting
     # a stored tanh(u) breaks once |u| > ~7.3, where tanh(u) rounds to 1 in float32 and the clamp to 1 - 1e-6
     # maps every such u to 7.25: old and new log-probs then disagree wildly (our first collision run collapsed
-    # with approx KL ~1e5 after 1.5M steps; the reference inverts the clamped action, learning.md 4).
+    # with approx KL ~1e5 after 1.5M steps; the reference inverts the clamped action, docs/model/learning.md §4).
     def sample_raw(self, generator: torch.Generator | None = None) -> torch.Tensor:
         return normal(self.base, generator)
 

@@ -1,4 +1,4 @@
-"""Implicit Q-learning (Kostrikov et al. 2021, arXiv:2110.06169) on a saved replay buffer (learning.md 8).
+"""Implicit Q-learning (Kostrikov et al. 2021, arXiv:2110.06169) on a saved replay buffer (docs/model/learning.md §8).
 
 Per minibatch: expectile value loss, Q loss towards r + gamma * not_done * V(s'), advantage-weighted regression
 of a fixed-std policy, then a soft update of the target critic. Offline passes sweep the whole dataset.
@@ -18,7 +18,7 @@ from roshan.algos.normalize import RewardScaler
 from roshan.algos.optim import make_optimizer, make_scheduler
 from roshan.config import IQLConfig
 
-POLICY_LOG_STD = -3.0  # the AWR policy's fixed std exp(-3) ~ 0.0498 (learning.md 4)
+POLICY_LOG_STD = -3.0  # the AWR policy's fixed std exp(-3) ~ 0.0498 (docs/model/learning.md §4)
 
 
 def expectile_loss(u: torch.Tensor, tau: float) -> torch.Tensor:
@@ -38,7 +38,7 @@ def iql_q_loss(q1: torch.Tensor, q2: torch.Tensor, rewards: torch.Tensor, not_do
 
     With ``broadcast_defect`` the reference's shapes are reproduced: V(s') and Q come as (B, 1), r and not_done
     as (B,), so y[i, j] = r[j] + gamma * not_done[j] * V(s'_i) is (B, B) and every Q_i regresses towards a
-    mixture of all rewards of the minibatch (learning.md 8).
+    mixture of all rewards of the minibatch (docs/model/learning.md §8).
     """
     if broadcast_defect:
         q1, q2, next_v = q1.unsqueeze(-1), q2.unsqueeze(-1), next_v.unsqueeze(-1)
@@ -60,7 +60,7 @@ class IQL:
         self.critic = TwinQ(collision, frames, encoder=shared).to(self.device)
         self.value = ValueNet(collision, frames, encoder=shared).to(self.device)
         self.critic_target = frozen_copy(self.critic)
-        # with sharing the encoder is in all three parameter lists and every loss steps it (learning.md 8)
+        # with sharing the encoder is in all three parameter lists and every loss steps it (docs/model/learning.md §8)
         self.actor_optimizer = make_optimizer(list(self.actor.parameters()), cfg.lr, cfg.optim)
         self.critic_optimizer = make_optimizer(list(self.critic.parameters()), cfg.lr, cfg.optim)
         self.value_optimizer = make_optimizer(list(self.value.parameters()), cfg.lr, cfg.optim)
@@ -74,13 +74,13 @@ class IQL:
     @torch.no_grad()
     def act(self, obs: dict[str, torch.Tensor], generator: torch.Generator | None = None) -> torch.Tensor:
         """The online-phase actions: :meth:`act_deterministic`, ``generator`` unused. The reference computes a
-        noisy copy and then executes the noise-free action (learning.md 4)."""
+        noisy copy and then executes the noise-free action (docs/model/learning.md §4)."""
         return self.act_deterministic(obs)
 
     @torch.no_grad()
     def act_deterministic(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         """tanh(mu) (B, 2): the TanhNormal mode, and in Gaussian mode the mean, which is tanh(mu) too
-        (learning.md 2.3)."""
+        (docs/model/learning.md §2.3)."""
         return torch.tanh(self.actor(to_device(obs, self.device)))
 
     def log_prob(self, obs: dict[str, torch.Tensor], actions: torch.Tensor) -> torch.Tensor:
@@ -134,8 +134,8 @@ class IQL:
     def offline_pass(self, buffer: ReplayBuffer, generator: torch.Generator | None = None) -> dict[str, float]:
         """One full pass over ``buffer`` in random order, in minibatches of ``batch_size``.
 
-        Reward scaling as the reference (learning.md 8): the first pass divides by the initial std (~1, so raw
-        rewards); every later pass first merges the whole dataset into the running estimator again (its count
+        Reward scaling as the reference (docs/model/learning.md §8): the first pass divides by the initial std (~1, so
+        raw rewards); every later pass first merges the whole dataset into the running estimator again (its count
         keeps growing) and divides by the resulting std.
         """
         if self.passes > 0:

@@ -1,4 +1,4 @@
-"""FlyAgent networks (learning.md 2): encoders, actor and critic heads, and the reference initialisation.
+"""FlyAgent networks (docs/model/learning.md §2): encoders, actor and critic heads, and the reference initialisation.
 
 Observations arrive as the env's dict: ``agent`` (B, T, 9), ``neighbors`` (B, T, K, 4) and ``neighbors_mask``
 (B, T, K) (1 = valid), with B = envs x drones flattened. Each frame is encoded with the same weights and the
@@ -32,7 +32,8 @@ def mlp(sizes: list[int], final_activation: bool = True) -> nn.Sequential:
 
 
 class SimpleEncoder(nn.Module):
-    """Collision-free encoder: per frame [v, dg - v] -> 64 (learning.md 2.1); ignores id, heading, neighbours."""
+    """Collision-free encoder: per frame [v, dg - v] -> 64 (docs/model/learning.md §2.1); ignores id, heading,
+    neighbours."""
 
     def __init__(self, frames: int = 3, hidden: int = 64):
         super().__init__()
@@ -50,7 +51,7 @@ class SimpleEncoder(nn.Module):
 
 
 class CollisionEncoder(nn.Module):
-    """Own features plus attention-pooled neighbours with the NoNeighbor flag (learning.md 2.2)."""
+    """Own features plus attention-pooled neighbours with the NoNeighbor flag (docs/model/learning.md §2.2)."""
 
     def __init__(self, frames: int = 3, hidden: int = 256, embed: int = 64):
         super().__init__()
@@ -170,19 +171,20 @@ def check_meta(saved: dict | None, expected: dict) -> None:
 
 
 def frozen_copy(net: nn.Module) -> nn.Module:
-    """A deep copy for use as a target network: no gradients, eval mode (learning.md 7)."""
+    """A deep copy for use as a target network: no gradients, eval mode (docs/model/learning.md §7)."""
     target = copy.deepcopy(net)
     target.requires_grad_(False)
     return target.eval()
 
 
 def _head(sizes: list[int], gain: float) -> nn.Sequential:
-    """ReLU hidden layers (gain sqrt 2) and a linear output layer with its own ``gain`` (learning.md 1)."""
+    """ReLU hidden layers (gain sqrt 2) and a linear output layer with its own ``gain`` (docs/model/learning.md §1)."""
     return nn.Sequential(*mlp(sizes[:-1]), layer_init(nn.Linear(sizes[-2], sizes[-1]), gain=gain))
 
 
 class DeterministicActor(nn.Module):
-    """TD3 actor mu(s) = tanh(MLP 400-300-2 on the encoding) (learning.md 2.3): (obs dict) -> (B, 2) in [-1, 1]."""
+    """TD3 actor mu(s) = tanh(MLP 400-300-2 on the encoding) (docs/model/learning.md §2.3): (obs dict) -> (B, 2)
+    in [-1, 1]."""
 
     def __init__(self, collision: bool, frames: int = 3):
         super().__init__()
@@ -209,7 +211,7 @@ class MeanActor(nn.Module):
 
 
 class TwinQ(nn.Module):
-    """Two Q heads Q_i(s, a) = MLP 256-256-1 on [encoder_i(s), a] (learning.md 2.3).
+    """Two Q heads Q_i(s, a) = MLP 256-256-1 on [encoder_i(s), a] (docs/model/learning.md §2.3).
 
     ``encoder`` given: both heads read that (shared, e.g. the actor's) encoder object, and it is encoded once.
     Otherwise each head owns its encoder.
@@ -237,7 +239,7 @@ class TwinQ(nn.Module):
 
 
 class ValueNet(nn.Module):
-    """IQL state value V(s) = MLP 256-256-1 on an encoder (learning.md 2.3): (obs dict) -> (B,).
+    """IQL state value V(s) = MLP 256-256-1 on an encoder (docs/model/learning.md §2.3): (obs dict) -> (B,).
 
     ``encoder`` given: read that (shared) encoder object; otherwise own one.
     """

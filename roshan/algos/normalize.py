@@ -1,4 +1,4 @@
-"""Reward scaling by a running standard deviation, without shifting (learning.md 6.2 step 1)."""
+"""Reward scaling by a running standard deviation, without shifting (docs/model/learning.md §6.2 step 1)."""
 
 import torch
 

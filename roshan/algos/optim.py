@@ -1,4 +1,4 @@
-"""Optimisers and learning-rate schedules from config, shared by PPO, TD3 and IQL (learning.md 6.3)."""
+"""Optimisers and learning-rate schedules from config, shared by PPO, TD3 and IQL (docs/model/learning.md §6.3)."""
 
 
 import torch

@@ -1,6 +1,6 @@
 """The PlannerAgent's networks: attention over fire candidates that assigns every drone a candidate goal
-(learning.md 3). The joint action of N drones is one sample (log-prob and entropy summed over drones); the PPO
-that trains them is :class:`roshan.algos.ppo.PPO` with :class:`roshan.algos.policies.PlannerPolicy`.
+(docs/model/learning.md §3). The joint action of N drones is one sample (log-prob and entropy summed over drones); the
+PPO that trains them is :class:`roshan.algos.ppo.PPO` with :class:`roshan.algos.policies.PlannerPolicy`.
 
 A planner observation is a dict of float tensors with the batch first: ``drones`` (B, N, 2), ``goals`` (B, N, 2),
 ``water`` (B, N, 1), ``fires`` (B, K, 2) (index 0 = the groundstation, then fire cells, zero padding after the
@@ -72,7 +72,7 @@ def score(logits: torch.Tensor, actions: torch.Tensor) -> tuple[torch.Tensor, to
 
 def init_weights(module: nn.Module) -> None:
     """Orthogonal weights with the ReLU gain and zero biases on every Linear, including the output projection
-    inside ``nn.MultiheadAttention`` (learning.md 1); embeddings, LayerNorms and attention input projections
+    inside ``nn.MultiheadAttention`` (docs/model/learning.md §1); embeddings, LayerNorms and attention input projections
     keep PyTorch's defaults. Value output layers are re-initialised with gain 1.0 by their owners."""
     for m in module.modules():
         if isinstance(m, nn.Linear):
@@ -83,9 +83,9 @@ def init_weights(module: nn.Module) -> None:
 
 
 class ThesisPlannerNet(nn.Module):
-    """Thesis-era planner (learning.md 3.1): one attention layer from drones to fire candidates whose head-averaged
-    weights are the per-drone categorical probabilities; the value is the mean over drones of a linear head on the
-    attention output.
+    """Thesis-era planner (docs/model/learning.md §3.1): one attention layer from drones to fire candidates whose
+    head-averaged weights are the per-drone categorical probabilities; the value is the mean over drones of a linear
+    head on the attention output.
 
     Deviation from the reference: the reference masks only the groundstation when acting and only the padding
     during the update, so the update evaluates a different distribution than the one that sampled the action.
@@ -168,7 +168,7 @@ def embed(in_features: int, hidden: int = HIDDEN) -> nn.Sequential:
 class PlannerEncoder(nn.Module):
     """Drone tokens from position, goal, id, velocity and water, plus the global fire context; self-attention
     among drones, then cross-attention to the fire candidates, each with a residual and LayerNorm
-    (learning.md 3.2)."""
+    (docs/model/learning.md §3.2)."""
 
     def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS):
         super().__init__()
@@ -188,7 +188,7 @@ class PlannerEncoder(nn.Module):
         """Drone representations (B, N, H), fire embeddings (B, K, H) and candidate validity (B, K)."""
         pos, g = obs["drones"], obs["globals"]
         valid = candidate_validity(obs["fires_mask"])
-        # velocity = pos_t - pos_{t-1}: always 0, the planner keeps one frame (learning.md 3.2)
+        # velocity = pos_t - pos_{t-1}: always 0, the planner keeps one frame (docs/model/learning.md §3.2)
         tokens = torch.cat([self.pos_emb(pos), self.goal_emb(obs["goals"]),
                             self.id_emb(self.drone_ids).expand(pos.shape[0], -1, -1),
                             self.vel_emb(torch.zeros_like(pos)), self.water_emb(obs["water"])], dim=-1)
@@ -201,8 +201,8 @@ class PlannerEncoder(nn.Module):
 
 
 class PointerPlannerNet(nn.Module):
-    """Newest planner (learning.md 3.2): the encoder above, a pointer actor decoded autoregressively over drones
-    (each fire at most once per decision, the groundstation any number of times, a learnable soft penalty on
+    """Newest planner (docs/model/learning.md §3.2): the encoder above, a pointer actor decoded autoregressively over
+    drones (each fire at most once per decision, the groundstation any number of times, a learnable soft penalty on
     repeats) and an attention-pooled critic on the shared encoder."""
 
     def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS,

@@ -8,7 +8,7 @@ A policy has ``net`` (the ``nn.Module`` whose parameters PPO optimises), ``share
 - ``sample(obs, generator, cache)``: a :class:`Sample` (env action, what the rollout stores, log-prob, value);
 - ``act_deterministic(obs, cache)``, ``value(obs)``, ``evaluate(obs, stored)`` (log-prob, entropy, value);
 - ``before_update(updates)`` (the manual log-std schedules), ``update_metrics()`` and ``new_cache()``;
-- ``novelty_dim`` and ``novelty_features(obs)``: the flat vector RND reads (learning.md 15).
+- ``novelty_dim`` and ``novelty_features(obs)``: the flat vector RND reads (docs/model/learning.md §15).
 """
 
 import math
@@ -51,7 +51,7 @@ SATURATED = 2.185  # atanh(0.975): a pre-tanh mean beyond it gives the action +-
 
 class FlyPolicy:
     """The FlyAgent actor-critic (:class:`ActorCritic`) with its ClippedGaussian or TanhNormal distribution,
-    the frame cache for acting and the manual log-std schedules of learning.md 4."""
+    the frame cache for acting and the manual log-std schedules of docs/model/learning.md §4."""
 
     def __init__(self, cfg: PPOConfig, collision: bool, frames: int = 3):
         self.cfg = cfg
@@ -68,7 +68,7 @@ class FlyPolicy:
 
     @staticmethod
     def novelty_features(obs: dict[str, torch.Tensor]) -> torch.Tensor:
-        """The drone's own stacked features ``agent`` (B, F, 9) flattened (learning.md 15)."""
+        """The drone's own stacked features ``agent`` (B, F, 9) flattened (docs/model/learning.md §15)."""
         return obs["agent"].flatten(1)
 
     def critic_parameters(self) -> list[nn.Parameter]:
@@ -142,7 +142,7 @@ class FlyPolicy:
         return self.cfg.mean_bound_coef * excess
 
     def before_update(self, updates: int) -> None:
-        """The manual schedules of learning.md 4, applied before each update (k = finished updates); nothing
+        """The manual schedules of docs/model/learning.md §4, applied before each update (k = finished updates); nothing
         for a learned log-std."""
         rho, k = self.cfg.decay_rate, updates
         with torch.no_grad():
@@ -167,7 +167,8 @@ class PlannerPolicy:
     candidate choice of its N drones as one action (B, N) long. Candidate lists are trimmed to the longest valid
     prefix of the batch before every forward pass (which changes no output)."""
 
-    shares_encoder = True  # both planner critics read the actor's encoder (thesis Table 5.8, learning.md 3.2)
+    # both planner critics read the actor's encoder (thesis Table 5.8, docs/model/learning.md §3.2)
+    shares_encoder = True
 
     def __init__(self, network: str, num_drones: int, temperature: float = 1.0):
         self.net = PLANNER_NETS[network](num_drones, temperature=temperature)

@@ -1,10 +1,10 @@
-"""PPO as in the reference (learning.md 6): clipped surrogate, GAE, reward scaling by a running std without
+"""PPO as in the reference (docs/model/learning.md §6): clipped surrogate, GAE, reward scaling by a running std without
 shift, per-minibatch advantage normalisation, KL early stop, gradient clipping per parameter group.
 
 One class trains both levels; the policy is plugged in (:mod:`roshan.algos.policies`): the FlyAgent
 actor-critic, whose rollout rows are drones (B = envs x drones; the done flags come from the env, one episode
 per env, so an episode that ends because of one drone ends every drone's trace: the reference keeps per-drone
-flags, learning.md 6.2 step 5 calls that a quirk), or a planner network, whose rows are envs (B = envs).
+flags, docs/model/learning.md §6.2 step 5 calls that a quirk), or a planner network, whose rows are envs (B = envs).
 """
 
 import copy
@@ -64,8 +64,8 @@ def normalized_advantages(adv: torch.Tensor) -> torch.Tensor:
 
 def minibatch_loss(cfg, new_logp: torch.Tensor, old_logp: torch.Tensor, entropy: torch.Tensor, value: torch.Tensor,
                    adv: torch.Tensor, ret: torch.Tensor, stats: dict) -> torch.Tensor | None:
-    """The PPO loss of one minibatch (clipped surrogate, entropy bonus, value loss; learning.md 6), its terms
-    appended to ``stats``; None when the approx-KL early stop triggers (only the KL is logged then). ``cfg``
+    """The PPO loss of one minibatch (clipped surrogate, entropy bonus, value loss; docs/model/learning.md §6), its
+    terms appended to ``stats``; None when the approx-KL early stop triggers (only the KL is logged then). ``cfg``
     is a PPO config (eps_clip, KL settings, coefficients)."""
     log_ratio = (new_logp - old_logp).clamp(-10.0, 10.0)
     ratio = log_ratio.exp()
@@ -132,14 +132,15 @@ class PPO:
     def __init__(self, cfg: PPOConfig, policy: Policy, device: str | torch.device = "cpu",
                  rnd: RNDConfig | None = None):
         if cfg.separate_optimizers and policy.shares_encoder:
-            raise ValueError("ppo.separate_optimizers needs ppo.share_encoder = false (learning.md 6.2)")
+            raise ValueError("ppo.separate_optimizers needs ppo.share_encoder = false (docs/model/learning.md §6.2)")
         self.cfg = cfg
         self.device = torch.device(device)
         self.policy = policy
         self.net = policy.net.to(self.device)
         critic_params = policy.critic_parameters()
         critic_ids = {id(p) for p in critic_params}
-        # Lists, not generators: the thesis-era code clipped exhausted generators, i.e. never (learning.md 6.2).
+        # Lists, not generators: the thesis-era code clipped exhausted generators, i.e. never
+        # (docs/model/learning.md §6.2).
         self.groups = {"actor": [p for p in self.net.parameters() if id(p) not in critic_ids and p.requires_grad],
                        "critic": critic_params}
         if cfg.separate_optimizers:
@@ -224,8 +225,8 @@ class PPO:
         return out
 
     def _intrinsic(self, rollout: Rollout, generator: torch.Generator | None) -> dict:
-        """RND (learning.md 15): ``rnd.coef`` x the scaled novelty of each row's observation (the rollout keeps
-        no next observations, so the state the action was taken in stands for it), then one pass of predictor
+        """RND (docs/model/learning.md §15): ``rnd.coef`` x the scaled novelty of each row's observation (the rollout
+        keeps no next observations, so the state the action was taken in stands for it), then one pass of predictor
         training over the rollout in minibatches of ``ppo.batch_size``. Returns the [T, B] rewards to add and
         the metrics."""
         T, B = rollout.log_probs.shape
@@ -247,7 +248,7 @@ class PPO:
         return stats
 
     def _sample_minibatches(self, rollout: Rollout, adv, ret, generator) -> Iterator[Iterator[tuple]]:
-        """k epochs of minibatches of shuffled transitions (learning.md 6.2 step 6)."""
+        """k epochs of minibatches of shuffled transitions (docs/model/learning.md §6.2 step 6)."""
         cfg = self.cfg
         flat = lambda x: x.flatten(0, 1)  # noqa: E731  [T, B, ...] -> [T * B, ...]
         obs = {k: flat(v) for k, v in rollout.obs.items()}

@@ -1,4 +1,4 @@
-"""Random network distillation (Burda et al. 2018, arXiv:1810.12894): an intrinsic reward (learning.md 15).
+"""Random network distillation (Burda et al. 2018, arXiv:1810.12894): an intrinsic reward (docs/model/learning.md §15).
 
 A frozen random target MLP and a trained predictor MLP read the same flattened feature vector (for FlyAgents
 ``obs["agent"]`` flattened); the prediction error is large on rarely seen inputs.
@@ -37,7 +37,7 @@ class RND:
     @torch.no_grad()
     def scaled_intrinsic(self, x: torch.Tensor) -> torch.Tensor:
         """The intrinsic reward divided by its own running std, which first merges this batch (as the extrinsic
-        rewards are scaled, learning.md 6.2): (B, ...) -> (B,). The caller adds ``cfg.coef`` times this."""
+        rewards are scaled, docs/model/learning.md §6.2): (B, ...) -> (B,). The caller adds ``cfg.coef`` times this."""
         rewards = self._error(x)
         self.scaler.update(rewards)
         return self.scaler.scale(rewards)

@@ -1,4 +1,5 @@
-"""TD3 (Fujimoto et al. 2018, arXiv:1802.09477) for the FlyAgent, as the reference implements it (learning.md 7).
+"""TD3 (Fujimoto et al. 2018, arXiv:1802.09477) for the FlyAgent, as the reference implements it
+(docs/model/learning.md §7).
 
 Target policy smoothing, clipped double Q on raw rewards, a delayed actor and soft target updates. The reference's
 (B, 1)-vs-(B,) critic MSE broadcast is available behind ``broadcast_defect`` for fidelity runs.
@@ -30,7 +31,7 @@ def critic_mse(q: torch.Tensor, y: torch.Tensor, broadcast_defect: bool = False)
     """MSE of Q (B,) against targets y (B,).
 
     With ``broadcast_defect`` the reference's shapes are reproduced: Q (B, 1) minus y (B,) broadcasts to (B, B),
-    so every Q value regresses towards every target of the minibatch (learning.md 7).
+    so every Q value regresses towards every target of the minibatch (docs/model/learning.md §7).
     """
     if broadcast_defect:
         return (q.unsqueeze(-1) - y.unsqueeze(0)).pow(2).mean()
@@ -59,7 +60,7 @@ class TD3:
         # and soft-updating both never moves one target encoder twice
         self.actor_target = frozen_copy(self.actor)
         self.critic_target = frozen_copy(self.critic)
-        # with sharing the encoder is in both parameter lists and both losses step it (learning.md 2.3)
+        # with sharing the encoder is in both parameter lists and both losses step it (docs/model/learning.md §2.3)
         self.actor_optimizer = make_optimizer(list(self.actor.parameters()), cfg.lr, cfg.optim)
         self.critic_optimizer = make_optimizer(list(self.critic.parameters()), cfg.lr, cfg.optim)
         self.actor_scheduler = make_scheduler(self.actor_optimizer, cfg.optim)

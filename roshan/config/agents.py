@@ -36,21 +36,22 @@ class RewardConfig(Section):
 
 @dataclass(frozen=True)
 class FlyConfig(Section):
-    """The FlyAgent task (agents.md 5-9)."""
+    """The FlyAgent task (docs/model/agents.md §5-9)."""
 
     policy: str = choice("simple", ("simple", "complex"))  # simple: reach the goal; complex: put every fire out
     collision: bool = False  # collisions terminate (and the collision reward terms apply)
-    time_limit: str = choice("newest", ("newest", "thesis"))  # T_max formulas of agents.md 5
+    time_limit: str = choice("newest", ("newest", "thesis"))  # T_max formulas of docs/model/agents.md §5
     k_turn: float = num(1.5, 0.0, lo_open=True, doc="detour factor of T_phys")
     fire_goal_percentage: float = num(1.0, 0.0, 1.0, doc="chance an initial goal is a fire (else a corner)")
     frames: int = num(3, 1, 8, doc="stacked observation frames (index 0 = newest)")
-    sticky_extinguish: bool = False  # True reproduces the original's sticky Extinguish reward flag (agents.md 7.1)
+    # True reproduces the original's sticky Extinguish reward flag (docs/model/agents.md §7.1)
+    sticky_extinguish: bool = False
     frame_skips: int = num(1, 1, 16, doc="physics steps per action; only the last one's reward is returned")
     rewards: RewardConfig = field(default_factory=RewardConfig)
 
 
-# agents.md 13.5: thesis Table 5.7 (best Optuna trial, P1 "Default") and Table 5.9 (mean of the top-10 trials,
-# the thesis-era and newest configs). The newest code's extra terms have one default set.
+# docs/model/agents.md §13.5: thesis Table 5.7 (best Optuna trial, P1 "Default") and Table 5.9 (mean of the top-10
+# trials, the thesis-era and newest configs). The newest code's extra terms have one default set.
 PLANNER_PRESETS: dict[str, dict[str, float]] = {
     "optuna_best": {"goal": 4.656, "burned": -0.886, "ground": -0.236, "timeout": -0.435, "same": -1.913,
                     "extinguish": 0.523, "fast": 0.523},
@@ -87,7 +88,7 @@ CONTROLLERS = ("planner", "greedy")  # who picks the planner drones' goals
 
 @dataclass(frozen=True)
 class PlannerConfig(Section):
-    """The planner level (agents.md 11, 13): timing, explorers, low-level policies, candidates, rewards."""
+    """The planner level (docs/model/agents.md §11, §13): timing, explorers, low-level policies, candidates, rewards."""
 
     interval: int = num(5, 1, 100, doc="hierarchy_timesteps: low-level steps per planner decision")
     fly_model: str = "models/fly_collision"  # frozen FlyAgent run folder or checkpoint for the planner drones
@@ -102,15 +103,16 @@ class PlannerConfig(Section):
     train_fires: str = choice("true", ("true", "detected"), doc="candidates in training: all burning cells "
                                                                 "(centralised) or the fire map")
     eval_fires: str = choice("detected", ("true", "detected"), doc="candidates in evaluation")
-    time_limit: str = choice("newest", ("newest", "thesis"))  # T_max formulas of agents.md 5
+    time_limit: str = choice("newest", ("newest", "thesis"))  # T_max formulas of docs/model/agents.md §5
     burnout: float = num(0.30, 0.0, 1.0, doc="burned-out fraction that fails the episode")
     greedy_home: str = choice("original", ("original", "fixed"),
                               doc="greedy heuristic: original = a drone whose fire is on the groundstation cell "
-                                  "re-takes it every step and never drops (agents.md 10.2); fixed = it drops")
+                                  "re-takes it every step and never drops (docs/model/agents.md §10.2); "
+                                  "fixed = it drops")
     max_candidates: int = num(0, 0, doc="candidate list length K (groundstation included); 0 = every cell + 1")
     temperature: float = num(1.0, 0.0, 10.0, lo_open=True,
                              doc="the planner's categorical is p^(1/T), renormalised (logits / T): T < 1 sharpens "
                                  "the sampled goals so training episodes can end in success; argmax is unchanged")
-    network: str = choice("thesis", ("thesis", "pointer"), doc="the planner network: learning.md 3.1 (thesis) or "
-                                                              "3.2 (pointer, newest)")
+    network: str = choice("thesis", ("thesis", "pointer"),
+                          doc="the planner network: docs/model/learning.md §3.1 (thesis) or §3.2 (pointer, newest)")
     rewards: PlannerRewardConfig = field(default_factory=PlannerRewardConfig)

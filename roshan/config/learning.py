@@ -99,7 +99,7 @@ class PPOConfig(Section):
 
 @dataclass(frozen=True)
 class TD3Config(Section):
-    """TD3 hyperparameters; defaults are thesis Table 5.2 (learning.md 14.1)."""
+    """TD3 hyperparameters; defaults are thesis Table 5.2 (docs/model/learning.md §14.1)."""
 
     lr: float = num(1e-4, 0.0, lo_open=True, doc="learning rate of actor and critic")
     batch_size: int = num(512, 1, doc="transitions per gradient iteration")
@@ -112,14 +112,15 @@ class TD3Config(Section):
     policy_noise: float = num(0.2, 0.0, doc="std of the target policy smoothing noise")
     noise_clip: float = num(0.5, 0.0, doc="the smoothing noise is clipped to +-noise_clip")
     policy_freq: int = num(2, 1, doc="critic iterations per actor (and target) update")
-    share_encoder: bool = False  # both Q heads read the actor's encoder (learning.md 1, 2.3)
-    broadcast_defect: bool = False  # reproduce the reference's (B,1)-vs-(B,) critic MSE (learning.md 7)
+    share_encoder: bool = False  # both Q heads read the actor's encoder (docs/model/learning.md §1, §2.3)
+    broadcast_defect: bool = False  # reproduce the reference's (B,1)-vs-(B,) critic MSE (docs/model/learning.md §7)
     optim: OptimConfig = field(default_factory=OptimConfig)
 
 
 @dataclass(frozen=True)
 class IQLConfig(Section):
-    """IQL hyperparameters; defaults are thesis Table 5.2 and the newest config (learning.md 14.1, 14.5)."""
+    """IQL hyperparameters; defaults are thesis Table 5.2 and the newest config
+    (docs/model/learning.md §14.1, §14.5)."""
 
     lr: float = num(1.575e-4, 0.0, lo_open=True, doc="learning rate of actor, critic and value")
     batch_size: int = num(250, 1, doc="transitions per minibatch")
@@ -131,16 +132,16 @@ class IQLConfig(Section):
     online_updates: int = num(0, 0, doc="online update calls after the offline phase")
     policy_freq: int = num(50, 1, doc="online: env steps between update calls")
     k_epochs: int = num(1, 1, doc="online: minibatches per update call")
-    share_encoder: bool = True  # critic and value read the actor's encoder (learning.md 1, 2.3)
+    share_encoder: bool = True  # critic and value read the actor's encoder (docs/model/learning.md §1, §2.3)
     use_tanh_dist: bool = True  # TanhNormal policy around mu; False: Gaussian around tanh(mu), clipped
-    broadcast_defect: bool = False  # reproduce the reference's (B, B) Q target (learning.md 8)
+    broadcast_defect: bool = False  # reproduce the reference's (B, B) Q target (docs/model/learning.md §8)
     max_weight: float = num(100.0, 0.0, lo_open=True, doc="upper clip of the advantage weights")
     optim: OptimConfig = field(default_factory=OptimConfig)
 
 
 @dataclass(frozen=True)
 class RNDConfig(Section):
-    """RND switches; off in every reference experiment (learning.md 15)."""
+    """RND switches; off in every reference experiment (docs/model/learning.md §15)."""
 
     enabled: bool = False  # add the scaled intrinsic reward to the scaled extrinsic one
     lr: float = num(1e-4, 0.0, lo_open=True, doc="predictor learning rate")

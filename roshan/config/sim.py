@@ -7,7 +7,7 @@ from roshan.config.schema import Section, choice, num
 
 @dataclass(frozen=True)
 class ConvectionConfig(Section):
-    """Convection particles: Langevin SDE for hot gas / embers (firespin.md 7.1)."""
+    """Convection particles: Langevin SDE for hot gas / embers (docs/model/fire.md §7.1)."""
 
     enabled: bool = True  # emit_convective
     y_st: float = num(1.0, 0.0, lo_open=True, doc="initial intensity")
@@ -20,7 +20,7 @@ class ConvectionConfig(Section):
 
 @dataclass(frozen=True)
 class RadiationConfig(Section):
-    """Radiation particles: random walk on a slowly growing circle (firespin.md 7.2)."""
+    """Radiation particles: random walk on a slowly growing circle (docs/model/fire.md §7.2)."""
 
     enabled: bool = True  # emit_radiation
     y_st: float = num(1.0, 0.0, lo_open=True, doc="initial intensity")
@@ -29,7 +29,7 @@ class RadiationConfig(Section):
 
 @dataclass(frozen=True)
 class FireConfig(Section):
-    """The FireSPIN cellular automaton (firespin.md 1-8)."""
+    """The FireSPIN cellular automaton (docs/model/fire.md §1-8)."""
 
     dt: float = num(0.1, 0.0, 10.0, lo_open=True, doc="time step (s)")
     flood_duration: float = num(5.0, 0.0, doc="how long a flooded cell stays flooded (s)")
@@ -56,7 +56,7 @@ class FireConfig(Section):
 
 @dataclass(frozen=True)
 class WindConfig(Section):
-    """Constant wind per episode (firespin.md 6)."""
+    """Constant wind per episode (docs/model/fire.md §6)."""
 
     speed: float = num(10.0, 0.0, 100.0, doc="10-m wind speed U_w (m/s)")
     direction: float = num(-1.0, -1.0, 360.0, hi_open=True,
@@ -66,7 +66,8 @@ class WindConfig(Section):
 
 @dataclass(frozen=True)
 class IgnitionConfig(Section):
-    """The initial fire generator (firespin.md 11): the newest code's, or the thesis era's with ``reseed: false``."""
+    """The initial fire generator (docs/model/fire.md §11): the newest code's, or the thesis era's with
+    ``reseed: false``."""
 
     fire_percentage: float = num(0.015, 0.0, 1.0, doc="fraction of all cells to ignite")
     clusters: int = num(2, 1, doc="number of clusters (or rings)")
@@ -78,7 +79,7 @@ class IgnitionConfig(Section):
 
 @dataclass(frozen=True)
 class DroneConfig(Section):
-    """FlyAgent drones (agents.md 1, 3, 4, 14): physics, sensing, start layout and water."""
+    """FlyAgent drones (docs/model/agents.md §1, §3, §4, §14): physics, sensing, start layout and water."""
 
     num_drones: int = num(4, 1, 64, doc="drones per env")
     max_speed: float = num(10.0, 0.0, lo_open=True, doc="v_max per axis (m/s)")
@@ -87,7 +88,7 @@ class DroneConfig(Section):
     use_vel_bins: bool = True  # actions rounded to 41 levels (steps of 0.05)
     use_velocity_change: bool = False  # acceleration mode: v += a * (v_max / 2) * dt
     groundstation_start_percentage: float = num(1.0, 0.0, 1.0, doc="chance a drone starts at the groundstation")
-    use_water_limit: bool = False  # finite tank, newest code (agents.md 14); off in the thesis experiments
+    use_water_limit: bool = False  # finite tank, newest code (docs/model/agents.md §14); off in the thesis experiments
     water_capacity: float = num(4.0, 0.0, lo_open=True, doc="tank size in drops (one drop puts out one cell)")
     recharge_time: float = num(2.0, 0.0, doc="seconds an empty tank takes to refill at the groundstation")
 

@@ -1,8 +1,8 @@
 """Scripted FlyAgent controllers: a straight-to-goal controller (the greedy baseline) and random actions.
 
 The greedy baseline is the env's **complex** policy plus :func:`straight_to_goal`. The complex policy lives
-in the kernels (:class:`roshan.kernels.tasks.GoalRules`, agents.md 7 and 10.1): every drone holds the nearest
-burning cell no other drone has reserved (the groundstation when there is none), drops water when it
+in the kernels (:class:`roshan.kernels.tasks.GoalRules`, docs/model/agents.md §7 and §10.1): every drone holds the
+nearest burning cell no other drone has reserved (the groundstation when there is none), drops water when it
 arrives there and takes the next nearest unreserved fire. So the goals already encode the greedy
 assignment, and a controller only has to fly each drone to its goal; this one does so without a network.
 

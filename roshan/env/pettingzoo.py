@@ -1,7 +1,8 @@
 """One FlyAgent environment as a PettingZoo ``ParallelEnv``: every drone is an agent.
 
 For multi-agent libraries that speak PettingZoo. The drones act simultaneously and their episode ends together
-(it ends when any drone is terminal, agents.md 9), so every step either keeps all agents or removes all of them.
+(it ends when any drone is terminal, docs/model/agents.md §9), so every step either keeps all agents or removes all of
+them.
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
-"""PlannerAgent vector environment (agents.md 13): one decision assigns every planner drone a goal among the
+"""PlannerAgent vector environment (docs/model/agents.md §13): one decision assigns every planner drone a goal among the
 known fires and the groundstation; frozen FlyAgent policies then fly the drones (and the explorers) for
 ``interval`` low-level steps inside the batched kernels of :mod:`roshan.kernels.planner`.
 
-The same class runs the greedy heuristic baseline (agents.md 10.2) with ``controller="greedy"``: it ignores
+The same class runs the greedy heuristic baseline (docs/model/agents.md §10.2) with ``controller="greedy"``: it ignores
 the actions, and since fire layouts and wind depend only on the env seed and the episode count, a planner and
 the heuristic evaluated with the same seed and number of envs play identical initial episodes.
 """

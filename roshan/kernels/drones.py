@@ -1,4 +1,4 @@
-"""Drone physics on the fire simulator's envs (agents.md 3-4, 14): motion, boundary, neighbours, collisions
+"""Drone physics on the fire simulator's envs (docs/model/agents.md §3-4, §14): motion, boundary, neighbours, collisions
 and the water tank.
 
 Drones live on the second axis of every field, ``(E, N)``. Positions and velocities are in metres and m/s
@@ -53,7 +53,7 @@ class DroneSim:
         margin = max(0.05 * self.cell, 0.1)
         self.ring = min(self.cell / 2.0 - margin, max(2.0 * cfg.drone_size, 0.35 * self.cell))
         self.start_gs = cfg.groundstation_start_percentage
-        # Water (agents.md 14, newest code). Every use sits behind ti.static(self.use_water), so without the
+        # Water (docs/model/agents.md §14, newest code). Every use sits behind ti.static(self.use_water), so without the
         # limit the kernels are the ones of an infinite tank.
         self.use_water = cfg.use_water_limit
         self.capacity = cfg.water_capacity
@@ -68,7 +68,7 @@ class DroneSim:
         self.neighbour_mask = ti.field(ti.i32, (E, N, N))
         self.goal = ti.Vector.field(2, ti.f32, (E, N))  # grid units (a cell centre)
         self.goal_cell = ti.field(ti.i32, (E, N))  # the burning cell this drone reserved, -1 for none
-        self.extinguished = ti.field(ti.i32, (E, N))  # extinguished_fire flag (agents.md 7.1)
+        self.extinguished = ti.field(ti.i32, (E, N))  # extinguished_fire flag (docs/model/agents.md §7.1)
         self.n_extinguished = ti.field(ti.i32, (E, N))
         self.objective = ti.field(ti.i32, (E, N))  # objective_reached
         self.prev_dist = ti.field(ti.f32, (E, N))  # distance to the goal at the previous reward (grid units)
@@ -175,8 +175,8 @@ class DroneSim:
 
     @ti.func
     def move_drone(self, e, d, a):
-        """agents.md 3.1: bins, velocity or acceleration mode, per-axis clamp, integrate, out-of-area count;
-        with the water limit, refill at the groundstation (agents.md 14)."""
+        """docs/model/agents.md §3.1: bins, velocity or acceleration mode, per-axis clamp, integrate, out-of-area count;
+        with the water limit, refill at the groundstation (docs/model/agents.md §14)."""
         a = ti.math.clamp(a, -1.0, 1.0)
         if ti.static(self.use_bins):
             a = ti.Vector([bin_action(a[0]), bin_action(a[1])])
@@ -210,7 +210,8 @@ class DroneSim:
 
     @ti.func
     def update_neighbours(self, e):
-        """agents.md 3.3: per drone, the nearest boundary and every other drone within half the view range."""
+        """docs/model/agents.md §3.3: per drone, the nearest boundary and every other drone within half the view
+        range."""
         for i in range(self.num_drones):
             x = self.pos[e, i] / self.cell
             b = self.nearest_boundary(x)
@@ -318,8 +319,8 @@ class DroneSim:
 
     @ti.func
     def extinguish_here(self, e, d) -> ti.i32:
-        """agents.md 7.1: drop water on the cell under the drone if it burns (with the water limit: only from a
-        non-empty tank, which loses one unit, clamped at 0). Returns 1 if that was the last burning cell of the
+        """docs/model/agents.md §7.1: drop water on the cell under the drone if it burns (with the water limit: only
+        from a non-empty tank, which loses one unit, clamped at 0). Returns 1 if that was the last burning cell of the
         map (the drone reached the complex policy's objective)."""
         c = self.cell_of(e, d)
         last = 0

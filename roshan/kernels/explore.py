@@ -1,5 +1,5 @@
-"""ExploreAgent (agents.md 11): the deterministic meander waypoints, how explorers advance along them, and the
-per-env fire map that every drone's view overwrites.
+"""ExploreAgent (docs/model/agents.md §11): the deterministic meander waypoints, how explorers advance along them, and
+the per-env fire map that every drone's view overwrites.
 
 Paths depend only on the map size, the number of explorers, the view range and the groundstation corner, so
 they are computed once in Python for the four possible corners and uploaded; a step only reads them.
@@ -23,7 +23,7 @@ NUM_CORNERS = 4  # groundstation cells (1, 1), (1, cols-2), (rows-2, 1), (rows-2
 
 def meander_paths(rows: int, cols: int, n: int, start_xy, vr: int, *, version: str = "newest",
                   reference_quirk: bool = False, cell_size: float = 10.0) -> list[np.ndarray]:
-    """The ExploreAgent's waypoints (agents.md 11.1): one boustrophedon path per explorer.
+    """The ExploreAgent's waypoints (docs/model/agents.md §11.1): one boustrophedon path per explorer.
 
     Args:
         rows, cols: map size ``W, H`` in cells.
@@ -92,7 +92,8 @@ def _stripe_paths(size: int, lines_size: int, n: int, vr: int, sweep_inc: bool, 
 
 
 def corner_cells(rows: int, cols: int) -> list[tuple[int, int]]:
-    """The four possible groundstation cells (agents.md 4.1), indexed by corner id ``2 * (row != 1) + (col != 1)``."""
+    """The four possible groundstation cells (docs/model/agents.md §4.1), indexed by corner id
+    ``2 * (row != 1) + (col != 1)``."""
     return [(1, 1), (1, cols - 2), (rows - 2, 1), (rows - 2, cols - 2)]
 
 
@@ -100,8 +101,8 @@ def covered_cells(paths, rows: int, cols: int, vr: int) -> np.ndarray:
     """Cells an explorer sees when flying the paths: (rows, cols) bool.
 
     A drone at grid point ``p`` sees the square of half width ``floor(vr / 2)`` around its integer cell
-    ``floor(p)`` (agents.md 11.3). Samples are every waypoint and points every 0.25 cells (or closer) along the
-    straight segments between consecutive waypoints of each path.
+    ``floor(p)`` (docs/model/agents.md §11.3). Samples are every waypoint and points every 0.25 cells (or closer) along
+    the straight segments between consecutive waypoints of each path.
     """
     h = vr // 2
     samples = []
@@ -126,7 +127,7 @@ def covered_cells(paths, rows: int, cols: int, vr: int) -> np.ndarray:
 
 @ti.data_oriented
 class ExploreMaps:
-    """Fire map and meander waypoints of E envs (agents.md 11).
+    """Fire map and meander waypoints of E envs (docs/model/agents.md §11).
 
     Args:
         fire: the simulator whose burning cells are observed.
@@ -256,8 +257,8 @@ class ExploreMaps:
 
     @ti.func
     def observe_square(self, e, cx, cy, half: ti.template()):
-        """agents.md 11.3: overwrite the cells of [cx-half, cx+half] x [cy-half, cy+half] (clipped to the map)
-        with 1 if burning now, else 0."""
+        """docs/model/agents.md §11.3: overwrite the cells of [cx-half, cx+half] x [cy-half, cy+half] (clipped to the
+        map) with 1 if burning now, else 0."""
         fm = ti.static(self.fire_map)
         for i in range(ti.max(cx - half, 0), ti.min(cx + half, self.rows - 1) + 1):
             for j in range(ti.max(cy - half, 0), ti.min(cy + half, self.cols - 1) + 1):
@@ -274,8 +275,8 @@ class ExploreMaps:
 
     @ti.func
     def observe_drone(self, e, group: ti.template(), d):
-        """Drone d of ``group`` marks the square of its group's view range around its integer cell (agents.md
-        3.1: call it right after the drone moved)."""
+        """Drone d of ``group`` marks the square of its group's view range around its integer cell
+        (docs/model/agents.md §3.1: call it right after the drone moved)."""
         p = group.pos[e, d] / group.cell
         self.observe_square(e, ti.cast(ti.floor(p[0]), ti.i32), ti.cast(ti.floor(p[1]), ti.i32),
                             ti.static(group.cfg.view_range // 2))
@@ -291,7 +292,7 @@ class ExploreMaps:
     @ti.func
     def reset_env(self, e, explorers: ti.template()):
         """Clear env e's fire map, pick its corner from the groundstation and give every explorer waypoint 0
-        (agents.md 11.2: the index then moves to 1)."""
+        (docs/model/agents.md §11.2: the index then moves to 1)."""
         for i, j in ti.ndrange(self.rows, self.cols):
             self.fire_map[e, i, j] = ti.i8(0)
         self.known_fires[e] = 0
@@ -316,7 +317,7 @@ class ExploreMaps:
 
     @ti.func
     def advance_if_reached(self, e, explorers: ti.template()) -> ti.i32:
-        """agents.md 11.2: once all explorers are within 0.25 cells (per axis) of their waypoints, give them
+        """docs/model/agents.md §11.2: once all explorers are within 0.25 cells (per axis) of their waypoints, give them
         waypoint ``wp_index`` and move the index on, within the bound set by ``index_bound``. Returns 1 if the
         explorers got new waypoints."""
         reached = 1

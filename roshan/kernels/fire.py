@@ -1,4 +1,4 @@
-"""FireSPIN on E independent copies of one land-cover map: cells, particles and their exchange (firespin.md).
+"""FireSPIN on E independent copies of one land-cover map: cells, particles and their exchange (docs/model/fire.md).
 
 One parallel loop runs over environments; each env's sparse work (its burning, exposed and flooded cell lists
 and its particle pools) is done serially inside it. That keeps a step's cost proportional to the fire, not the
@@ -324,7 +324,7 @@ class FireSim:
         self.cls_sf = ti.Vector.field(2, ti.f32, n)  # mean, std of the no-wind radiation spread rate
         tau_ign = np.array([c.tau_ign for c in CLASSES], np.float32)
         tau_burn = np.array([c.tau_burn for c in CLASSES], np.float32)
-        if land.is_uniform:  # the uniform map takes its times from the config (firespin.md 2.2)
+        if land.is_uniform:  # the uniform map takes its times from the config (docs/model/fire.md §2.2)
             tau_ign[GENERIC_UNBURNED] = self.fire_cfg.uniform_ignition_time
             tau_burn[GENERIC_UNBURNED] = self.fire_cfg.uniform_burning_time
         ints = np.array([(c.is_ignitable, c.n_conv, c.n_rad) for c in CLASSES], np.int32)
@@ -382,7 +382,7 @@ class FireSim:
         return self.counters()
 
     def flood(self, requests, extinguished) -> None:
-        """Drop water on cells (firespin.md 8), in order within each env.
+        """Drop water on cells (docs/model/fire.md §8), in order within each env.
 
         Args:
             requests: (E, M) int32 flat cell indices ``i * cols + j``; negative entries are ignored.
@@ -540,7 +540,7 @@ class FireSim:
 
     @ti.func
     def drop_water(self, e, c) -> ti.i32:
-        """Flood cell c of env e (firespin.md 8); 1 if it was burning."""
+        """Flood cell c of env e (docs/model/fire.md §8); 1 if it was burning."""
         return self._drop_water(e, c)
 
     # Read access for the kernels of other modules (drones, tasks, episodes, rendering, the initial-fire
@@ -717,7 +717,7 @@ class FireSim:
 
     @ti.func
     def _durations(self, e, c):
-        """(tau_ign, tau_burn) of cell c this episode, firespin.md 2.3: durations x (1 + s*u), s in {-1, 0, 1},
+        """(tau_ign, tau_burn) of cell c this episode, docs/model/fire.md §2.3: durations x (1 + s*u), s in {-1, 0, 1},
         u ~ U(0.1, 0.2); tau_ign is NEVER for a class that cannot ignite."""
         cls = self.land[c]
         k = rng.key(self.env_key[e], rng.DOMAIN_CELLS, c)
@@ -801,7 +801,7 @@ class FireSim:
 
     @ti.func
     def _step_env(self, e):
-        """One fire update in the reference's order (firespin.md 4); steps 2 and 4 share one pass."""
+        """One fire update in the reference's order (docs/model/fire.md §4); steps 2 and 4 share one pass."""
         t = self.counts[e, N_STEP] + 1
         self.counts[e, N_STEP] = t
         step_key = rng.mix32(self.env_key[e] ^ (ti.cast(t, ti.u32) * ti.u32(0x9E3779B9)))
@@ -1033,7 +1033,7 @@ class FireSim:
 
     @ti.func
     def _drop_water(self, e, c) -> ti.i32:
-        """firespin.md 8: flood a cell; returns 1 if it was burning (extinguished). A drop the sparse pool has
+        """docs/model/fire.md §8: flood a cell; returns 1 if it was burning (extinguished). A drop the sparse pool has
         no room for is counted in N_DROP_BLOCK and changes nothing."""
         r = self._touch(e, c)
         was_burning = 0
@@ -1099,7 +1099,7 @@ class FireSim:
 
 @ti.func
 def _period(tau_burn: ti.f64, n: ti.i32) -> ti.i32:
-    """Emission period in whole seconds: max(1, floor((tau_burn - 1) / n)) (firespin.md 2.3)."""
+    """Emission period in whole seconds: max(1, floor((tau_burn - 1) / n)) (docs/model/fire.md §2.3)."""
     p = 1
     if n > 0:
         p = ti.max(1, ti.cast(ti.floor((tau_burn - 1.0) / n), ti.i32))

@@ -1,9 +1,9 @@
 """FlyAgent task kernels: E fire maps with N drones each, stepped by one kernel launch.
 
-One physics step of env e (agents.md 2), serially inside the launch: the fire update; then every drone moves,
-handles its goal (complex policy: extinguish and take the nearest unreserved fire; simple: reaching the goal is
+One physics step of env e (docs/model/agents.md §2), serially inside the launch: the fire update; then every drone
+moves, handles its goal (complex policy: extinguish and take the nearest unreserved fire; simple: reaching the goal is
 the objective), is checked for termination and rewarded; then neighbours and collisions are recomputed. One
-env step (a control period, agents.md 12) runs ``frame_skips`` physics steps with the same actions, fewer if
+env step (a control period, docs/model/agents.md §12) runs ``frame_skips`` physics steps with the same actions, fewer if
 the episode ends, and then pushes one observation frame. A second launch copies the observation of every env
 whose episode ended to ``final_obs`` and resets it (Gymnasium's same-step autoreset,
 :class:`roshan.kernels.episode.EpisodeKernels`). The goal rules are :class:`roshan.kernels.tasks.GoalRules`,
@@ -27,7 +27,8 @@ from roshan.kernels.tasks import EXTINGUISH, REACH, BurningCells, GoalRules
 
 def time_limit(rows: int, cols: int, cell: float, dt: float, v_max: float, fire_percentage: float,
                cfg: FlyConfig) -> int:
-    """T_max of agents.md 5 for a FlyAgent run (newest: ceil(4 T_phys); thesis-era: 2 T_phys, complex x beta1)."""
+    """T_max of docs/model/agents.md §5 for a FlyAgent run (newest: ceil(4 T_phys); thesis-era: 2 T_phys, complex x
+    beta1)."""
     diag = cell * math.sqrt(rows**2 + cols**2)
     t_phys = math.ceil(diag / v_max * cfg.k_turn / dt)
     if cfg.time_limit == "newest":
@@ -89,7 +90,7 @@ class FlyKernels(EpisodeKernels):
     @ti.func
     def step_env(self, actions: ti.template(), obs: ti.template(), rewards: ti.template(), dones: ti.template(),
                  episode: ti.template(), e):
-        """One control period of env e (agents.md 12): ``frame_skips`` physics steps with the same actions,
+        """One control period of env e (docs/model/agents.md §12): ``frame_skips`` physics steps with the same actions,
         stopping at the step that ends the episode, then one new observation frame. ``rewards`` and ``dones``
         are the last executed step's: like the reference, the rewards of the steps before it are dropped."""
         if ti.static(self.frame_skips == 1):
@@ -124,7 +125,7 @@ class FlyKernels(EpisodeKernels):
             reason = self.failure_reason(e, d, 0)
             real_end |= ti.cast(reason != 0 or succeeded != 0, ti.i32)
             if timed_out != 0:
-                reason = TIMEOUT  # agents.md 9: the timeout overwrites the other reasons in the record
+                reason = TIMEOUT  # docs/model/agents.md §9: the timeout overwrites the other reasons in the record
             terminal = ti.cast(reason != 0 or succeeded != 0, ti.i32)
             if terminal != 0:
                 any_terminal = 1
@@ -147,7 +148,7 @@ class FlyKernels(EpisodeKernels):
 
     @ti.func
     def failure_reason(self, e, d, timed_out) -> ti.i32:
-        """agents.md 9: later rules overwrite earlier ones (timeout > collision > boundary)."""
+        """docs/model/agents.md §9: later rules overwrite earlier ones (timeout > collision > boundary)."""
         reason = 0
         if self.drones.out_count[e, d] > 1:
             reason = BOUNDARY
@@ -169,7 +170,7 @@ class FlyKernels(EpisodeKernels):
 
     @ti.func
     def reward(self, e, d, goal_flag, terminal, timed_out) -> ti.f32:
-        """agents.md 8.1 for drone d, with the neighbour list of the previous step (proximity)."""
+        """docs/model/agents.md §8.1 for drone d, with the neighbour list of the previous step (proximity)."""
         dr = self.drones
         dist = dr.distance_to_goal(e, d)
         progress = dr.prev_dist[e, d] - dist

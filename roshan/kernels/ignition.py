@@ -1,4 +1,4 @@
-"""Initial fire generator (firespin.md 11): cluster, scattered, ring and random patterns.
+"""Initial fire generator (docs/model/fire.md §11): cluster, scattered, ring and random patterns.
 
 The newest code re-seeds a cluster whose growth got trapped until it has its share of the fires, so a 35 %
 setting lights 35 % of the cells; the thesis-era code (``ignition.reseed: false``) does not, so there the

@@ -1,4 +1,4 @@
-"""FlyAgent observations (agents.md 6) written by kernels into one preallocated float buffer.
+"""FlyAgent observations (docs/model/agents.md §6) written by kernels into one preallocated float buffer.
 
 Layout per (env, drone, frame): the 9 own features, then N neighbour slots x 4, then the N-slot validity
 mask (1.0 / 0.0). The env exposes torch views of this one buffer (``agent``, ``neighbors``,
@@ -18,7 +18,7 @@ def frame_width(num_drones: int) -> int:
 
 @ti.func
 def own_features(drone_id: ti.i32, v, p, g, v_max: ti.f32, s: ti.f32):
-    """The 9 features of agents.md 6: id, velocity, goal delta, heading cos/sin, speed, distance."""
+    """The 9 features of docs/model/agents.md §6: id, velocity, goal delta, heading cos/sin, speed, distance."""
     vn = ti.math.clamp(v / (v_max * s), -1.0, 1.0)
     delta = g - p
     dg = ti.math.clamp(delta / s, -1.0, 1.0)

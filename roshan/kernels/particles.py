@@ -1,4 +1,4 @@
-"""Convection and radiation particle updates (firespin.md 7) as pure ``ti.func``s on particle records.
+"""Convection and radiation particle updates (docs/model/fire.md §7) as pure ``ti.func``s on particle records.
 
 Records are f32 vectors so a particle is one contiguous load and store in the serial per-env pass.
 """

@@ -1,15 +1,15 @@
-"""PlannerAgent level (agents.md 10.2, 11, 13): goal assignment, the low-level steps of planner drones and
+"""PlannerAgent level (docs/model/agents.md §10.2, §11, §13): goal assignment, the low-level steps of planner drones and
 explorers, planner rewards, termination and the planner observation, batched over envs.
 
 One planner step of env e is ``apply`` (the chosen candidates become the drones' goals), ``interval`` calls of
 ``low_step`` (the fire, the explorers and the planner drones each advance once; the env's Python side runs the
 frozen FlyAgent policies in between), then ``finish`` (reward, termination, a fresh observation). With the
-greedy controller (the heuristic baseline of agents.md 10.2) ``apply`` is skipped, the drones pick their own
+greedy controller (the heuristic baseline of docs/model/agents.md §10.2) ``apply`` is skipped, the drones pick their own
 goals inside ``low_step`` and an episode may end at any low-level step. The low-level drone step and its goal
 rules are the FlyAgent level's (:class:`roshan.kernels.tasks.GoalRules`); this module adds the decisions,
 the planner rewards and termination on top.
 
-Deliberate differences from the reference (agents.md 13.1, 13.5):
+Deliberate differences from the reference (docs/model/agents.md §13.1, §13.5):
 - the observation is built after the interval from the state it ends in (the reference shows the planner the
   fires of the previous decision and goals of the one before: the stale-observation defect);
 - the reward of a decision pays what happened in the interval it started (extinguished cells, spread), not
@@ -39,8 +39,8 @@ GROUND_GOAL = -2  # goal_cell of a drone sent to the groundstation by the planne
 
 def planner_time_limit(rows: int, cols: int, cell: float, dt: float, v_max: float, fire_percentage: float,
                        version: str, k_turn: float = 1.5) -> int:
-    """T_max of a planner or heuristic episode (agents.md 5): newest ``max(t_move + F, ceil(4 T_phys))`` with
-    ``beta = 0.42``; thesis-era ``max(ceil((t_move + F dt) / dt), ceil(2 T_phys))`` with ``beta = 0.3``."""
+    """T_max of a planner or heuristic episode (docs/model/agents.md §5): newest ``max(t_move + F, ceil(4 T_phys))``
+    with ``beta = 0.42``; thesis-era ``max(ceil((t_move + F dt) / dt), ceil(2 T_phys))`` with ``beta = 0.3``."""
     area = rows * cols
     fires = math.ceil(float(np.float32(fire_percentage)) * area)
     t_phys = math.ceil(cell * math.sqrt(rows**2 + cols**2) / v_max * k_turn / dt)
@@ -72,7 +72,7 @@ class PlannerKernels(EpisodeKernels):
         interval: low-level steps per planner step (``hierarchy_timesteps``).
         t_max: low-level step limit of an episode.
         coef: :class:`roshan.kernels.rewards.PlannerCoefficients`.
-        greedy: the drones follow the heuristic state machine (agents.md 10.2) instead of planner goals.
+        greedy: the drones follow the heuristic state machine (docs/model/agents.md §10.2) instead of planner goals.
         greedy_home_fixed: the heuristic with the groundstation fix (:class:`GoalRules`, ``wake_reserved``).
         move_explorers: step the explorers (evaluation); in planner training they stay at the groundstation.
         detected: the candidates are the fire map's cells (fires some drone has seen) instead of all burning
@@ -99,7 +99,8 @@ class PlannerKernels(EpisodeKernels):
         self.norm = 2.0 / max(fire.rows, fire.cols)  # norm(q) = q * norm - 1
         self.log_cells = math.log(1.0 + fire.num_cells)
         # The low level runs the FlyAgent goal rules: planner drones drop water on every burning cell they fly
-        # over (agents.md 7) and keep the planner's goals; the heuristic's drones pick known fires themselves.
+        # over (docs/model/agents.md §7) and keep the planner's goals; the heuristic's drones pick known fires
+        # themselves.
         if greedy:
             self.rules = GoalRules(drones, KnownFires(fire, maps), mode=EXTINGUISH, wake_idle=True,
                                    wake_reserved=not greedy_home_fixed, sensor=maps)
@@ -122,7 +123,7 @@ class PlannerKernels(EpisodeKernels):
     @ti.kernel
     def apply(self, actions: ti.types.ndarray(dtype=ti.i64, ndim=2)):
         """The planner's candidate indices become the drones' goals; the goal-dependent reward terms are
-        evaluated now, on the decision itself (agents.md 13.5)."""
+        evaluated now, on the decision itself (docs/model/agents.md §13.5)."""
         for e in range(self.fire.num_envs):
             self.assign_goals(actions, e)
 
@@ -164,7 +165,7 @@ class PlannerKernels(EpisodeKernels):
     @ti.func
     def new_episode(self, obs: ti.template(), obs_fly: ti.template(), obs_explore: ti.template(), e,
                     seed_key: ti.u32):
-        """agents.md 4: fire, groundstation, drones (planner drones towards the nearest true fires, or the
+        """docs/model/agents.md §4: fire, groundstation, drones (planner drones towards the nearest true fires, or the
         groundstation for the heuristic, whose fire map is empty), explorers on their first waypoint."""
         dr, ex = self.drones, self.explorers
         self.fire.reset_env(e, seed_key)
@@ -202,7 +203,7 @@ class PlannerKernels(EpisodeKernels):
 
     @ti.func
     def end_reason(self, e, timed_out) -> ti.types.vector(2, ti.i32):
-        """agents.md 13.6 (later rules overwrite the reason): (terminal, reason)."""
+        """docs/model/agents.md §13.6 (later rules overwrite the reason): (terminal, reason)."""
         terminal = self.objective[e]
         reason = 0
         if ti.cast(self.fire.burned_count(e), ti.f32) > self.burnout * self.fire.num_cells:
@@ -246,7 +247,7 @@ class PlannerKernels(EpisodeKernels):
 
     @ti.func
     def assign_goals(self, actions: ti.template(), e):
-        """agents.md 13.4: candidate 0 (and any index past the valid list) is the groundstation."""
+        """docs/model/agents.md §13.4: candidate 0 (and any index past the valid list) is the groundstation."""
         dr = self.drones
         gs = dr.groundstation_centre(e)
         for d in range(dr.num_drones):
@@ -302,7 +303,7 @@ class PlannerKernels(EpisodeKernels):
     def low_step_env(self, act_fly: ti.template(), act_explore: ti.template(), obs_fly: ti.template(),
                      obs_explore: ti.template(), rewards: ti.template(), dones: ti.template(), episode: ti.template(),
                      e):
-        """One fire update and one move of every active drone of env e (agents.md 2, 13.1)."""
+        """One fire update and one move of every active drone of env e (docs/model/agents.md §2, §13.1)."""
         dr, ex = self.drones, self.explorers
         self.fire.step_env(e)
         self.steps[e] += 1
@@ -331,7 +332,7 @@ class PlannerKernels(EpisodeKernels):
 
     @ti.func
     def build_obs(self, obs: ti.template(), e):
-        """The planner observation of env e (agents.md 13.3) and its candidate list."""
+        """The planner observation of env e (docs/model/agents.md §13.3) and its candidate list."""
         dr = self.drones
         for d in range(dr.num_drones):
             p = dr.pos[e, d] / dr.cell

@@ -1,4 +1,4 @@
-"""Frames of one FireSim env as north-up RGB images, drawn by Taichi kernels (firespin.md 13).
+"""Frames of one FireSim env as north-up RGB images, drawn by Taichi kernels (docs/model/fire.md §13).
 
 A frame is built in one ``u8`` image field, ``image[py, px]``, with pixel row 0 = grid row 0 (the northern
 edge) and pixel column = grid column, ``cell_px`` pixels per cell:
@@ -62,7 +62,7 @@ BACKENDS = ("auto", "ggui", "raster")
 TARGET_LONG_SIDE_PX = 720  # default frame size: the longer side of the map is about this many pixels
 MIN_CELL_PX, MAX_CELL_PX = 2, 24
 MIN_RADIUS_PX = 0.75  # > sqrt(2)/2: some pixel centre always lies inside the particle's disc
-BURNED_WEIGHT, FLOODED_WEIGHT = 20, 40  # state colour : original class colour (firespin.md 13)
+BURNED_WEIGHT, FLOODED_WEIGHT = 20, 40  # state colour : original class colour (docs/model/fire.md §13)
 ARROW_BACKDROP = (21, 19, 51)  # the reference's background colour, behind the wind arrow
 ARROW_BACKDROP_ALPHA = 0.65
 # Burning cells that no drone has seen yet (frames with a detected-fire map): a dim, greyed red, so the fires the
@@ -97,7 +97,7 @@ def cell_colours() -> np.ndarray:
 
 @ti.func
 def fire_colour(y: ti.f32):
-    """The "fire" palette of firespin.md 13 as (r, g, b, alpha), r/g/b in 0..255, alpha in 0.6..1.
+    """The "fire" palette of docs/model/fire.md §13 as (r, g, b, alpha), r/g/b in 0..255, alpha in 0.6..1.
 
     Y <= 0.3: dark red (128, 0, 0) -> (255, 100, 0); Y > 0.3: red -> yellow, green from 128 up to at most 255
     (the reference overflows its 8-bit green channel here; we clamp instead).

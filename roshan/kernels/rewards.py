@@ -1,4 +1,5 @@
-"""FlyAgent (agents.md 8) and PlannerAgent (agents.md 13.5) reward terms: the one place rewards are paid.
+"""FlyAgent (docs/model/agents.md §8) and PlannerAgent (docs/model/agents.md §13.5) reward terms: the one place rewards
+are paid.
 
 The presets and the config sections that choose them are in :mod:`roshan.config.agents`.
 
@@ -47,7 +48,7 @@ class RewardCoefficients:
 @ti.func
 def fly_reward(coef: ti.template(), reached: ti.i32, outside_and_terminal: ti.i32, timed_out: ti.i32,
                extinguished: ti.i32, collided: ti.i32, progress: ti.f32, proximity: ti.f32) -> ti.f32:
-    """Sum of the present terms for one drone (agents.md 8.1).
+    """Sum of the present terms for one drone (docs/model/agents.md §8.1).
 
     ``progress`` is d_{t-1} - d_t (only improvements pay); ``proximity`` the sum of the previous frame's
     neighbour offset components below :data:`PROXIMITY_THRESHOLD`.
@@ -110,7 +111,7 @@ class PlannerCoefficients:
 @ti.func
 def planner_outcome_reward(coef: ti.template(), objective: ti.i32, timed_out: ti.i32, terminal: ti.i32,
                            remaining_fraction: ti.f32) -> ti.f32:
-    """The exclusive outcome terms of agents.md 13.5: GoalReached + FastExtinguish, else TimeOut, else
+    """The exclusive outcome terms of docs/model/agents.md §13.5: GoalReached + FastExtinguish, else TimeOut, else
     MapBurnedTooMuch (burnout, or the fires died out on their own)."""
     r = 0.0
     if objective != 0:

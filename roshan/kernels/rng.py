@@ -2,7 +2,7 @@
 
 A trajectory therefore depends on the seed alone, not on thread count or launch order. Normal deviates come
 from a fixed table of 2**16 exact normal quantiles indexed by 16 hash bits (the original also reuses a
-pre-generated ring buffer of normals, firespin.md 12); one 32-bit hash thus yields two independent normals.
+pre-generated ring buffer of normals, docs/model/fire.md §12); one 32-bit hash thus yields two independent normals.
 """
 
 

@@ -1,4 +1,4 @@
-"""The goal and extinguish rules of a drone (agents.md 7, 10.1, 10.2), one copy for both levels.
+"""The goal and extinguish rules of a drone (docs/model/agents.md §7, §10.1, §10.2), one copy for both levels.
 
 A FlyAgent drone and a drone flown under the planner run the same per-drone step: :meth:`GoalRules.drone_step`
 moves it (:meth:`roshan.kernels.drones.DroneSim.move_drone`), lets an optional sensor (the planner's fire map)
@@ -85,7 +85,7 @@ class KnownFires:
 
 @ti.func
 def nearest_free_cell(drones: ti.template(), cands: ti.template(), e, d) -> ti.i32:
-    """agents.md 10.1: the candidate nearest to drone d that no other drone holds, or -1.
+    """docs/model/agents.md §10.1: the candidate nearest to drone d that no other drone holds, or -1.
 
     Distances are squared index distances from the drone's integer cell; the first of equals in the set's
     order wins.
@@ -131,7 +131,7 @@ class GoalRules:
         candidates: :class:`BurningCells` or :class:`KnownFires`.
         mode: ``REACH``, ``EXTINGUISH`` or ``DROP_ANYWHERE`` (module docstring).
         water_policy: with ``EXTINGUISH`` and a finite tank, a drone whose drop emptied it flies home and
-            waits there until full (agents.md 10.2, 14).
+            waits there until full (docs/model/agents.md §10.2, §14).
         sticky: keep the ``extinguished`` flag set after the step it was raised in (the reference's defect;
             the fix clears it every step, so Extinguish pays on the step water hits a fire only).
         wake_idle: a drone heading for the groundstation takes the nearest candidate as soon as there is one
@@ -167,7 +167,7 @@ class GoalRules:
 
     @ti.func
     def handle_goal(self, e, d) -> ti.i32:
-        """agents.md 7 at drone d's position; returns 1 if it put out the map's last fire."""
+        """docs/model/agents.md §7 at drone d's position; returns 1 if it put out the map's last fire."""
         dr = self.drones
         last = 0
         if ti.static(self.mode == DROP_ANYWHERE):

@@ -379,7 +379,7 @@ def save_buffer(target: str | Path, transitions: int, path: Path, seed: int = 0,
                 which: str = "best", overrides: list[str] | tuple[str, ...] = (),
                 progress_bar: bool = True, replace: bool = False) -> str:
     """Record ``transitions`` (drone transitions) of the deterministic policy into a replay buffer file (the IQL
-    dataset of learning.md 8: raw rewards, per-drone not_done, next observations; the env's ``final_obs`` is
+    dataset of docs/model/learning.md §8: raw rewards, per-drone not_done, next observations; the env's ``final_obs`` is
     the next observation where an episode ended, and only a real terminal sets not_done = 0). An existing
     ``path`` is refused unless ``replace``."""
     refuse_overwrite(path, "the replay buffer", replace)

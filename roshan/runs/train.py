@@ -73,7 +73,8 @@ class EpisodeLog:
 
     @property
     def objective(self) -> float:
-        """Success rate over the last ``window`` training episodes; 0 until that many exist (learning.md 9)."""
+        """Success rate over the last ``window`` training episodes; 0 until that many exist
+        (docs/model/learning.md §9)."""
         return float(np.mean(self.recent)) if len(self.recent) >= self.window else 0.0
 
     @property
@@ -122,7 +123,7 @@ class OffPolicyCollector:
 
 class TD3Learner:
     """One iteration = ``env_steps_per_iteration`` env steps, each followed by one TD3 update call (k_epochs
-    gradient iterations) once the buffer holds ``min_memory_size`` transitions (learning.md 7)."""
+    gradient iterations) once the buffer holds ``min_memory_size`` transitions (docs/model/learning.md §7)."""
 
     env_steps_per_iteration = 64
 
@@ -155,7 +156,7 @@ class TD3Learner:
 class IQLLearner:
     """Iterations 1..offline_updates: one pass each over the saved dataset (no env steps); then, if
     ``online_updates`` > 0, one iteration = ``policy_freq`` env steps with the IQL actor appended to the
-    buffer, then one update of ``k_epochs`` minibatches (learning.md 8)."""
+    buffer, then one update of ``k_epochs`` minibatches (docs/model/learning.md §8)."""
 
     def __init__(self, cfg: Config, env: FlyVectorEnv, agent):
 
@@ -445,7 +446,7 @@ class Trainer:
             self._save(self.state_dict(), "best_eval")
 
     def _checkpoint(self, batch_reward: float) -> None:
-        """latest always; best_reward / best_objective when the metric ties or improves (learning.md 9)."""
+        """latest always; best_reward / best_objective when the metric ties or improves (docs/model/learning.md §9)."""
         p, state = self.progress, self.state_dict()
         self._save(state, "latest")
         if batch_reward == batch_reward and batch_reward >= p.best_reward:

@@ -14,7 +14,7 @@ from roshan.runs.train import rollout_steps
 from roshan.study.errors import StudyError
 from roshan.study.space import SearchSpace, load_space, parse_space
 
-OBJECTIVES = {"success": "maximize", "reward": "maximize", "tte": "minimize"}  # learning.md 13
+OBJECTIVES = {"success": "maximize", "reward": "maximize", "tte": "minimize"}  # docs/model/learning.md §13
 RECIPE_ATTR = "roshan_recipe"  # study user attribute holding the recipe
 
 

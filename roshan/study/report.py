@@ -1,5 +1,5 @@
-"""The report of a study: the best trials, the thesis's mean of the top-k parameters (learning.md 13) as ready
-config YAMLs, a CSV of every trial and Optuna's plots.
+"""The report of a study: the best trials, the thesis's mean of the top-k parameters (docs/model/learning.md §13) as
+ready config YAMLs, a CSV of every trial and Optuna's plots.
 """
 
 from __future__ import annotations
@@ -29,8 +29,8 @@ def best_trials(study: optuna.Study, k: int) -> list[FrozenTrial]:
 
 
 def mean_of_top_k(study: optuna.Study, k: int = 10) -> dict[str, Any]:
-    """The thesis's method (learning.md 13, Tables 5.5 / 5.9): the arithmetic mean of each parameter over the
-    ``k`` best trials (ints rounded, categoricals: the most common, ties to the better trial), ties applied."""
+    """The thesis's method (docs/model/learning.md §13, Tables 5.5 / 5.9): the arithmetic mean of each parameter over
+    the ``k`` best trials (ints rounded, categoricals: the most common, ties to the better trial), ties applied."""
     top = best_trials(study, k)
     if not top:
         raise StudyError(f"study {study.study_name!r} has no completed trial yet")

@@ -1,4 +1,4 @@
-"""The ``roshan study`` command: Optuna studies over any config keys (learning.md 13).
+"""The ``roshan study`` command: Optuna studies over any config keys (docs/model/learning.md §13).
 
 A study lives in its storage together with its *recipe*: the base config, the search space, the objective and
 the trial budget. The default storage is an Optuna journal file, ``<root>/<name>/study.journal``; any SQLAlchemy

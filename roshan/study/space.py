@@ -1,5 +1,5 @@
-"""Search spaces of a study (learning.md 13): which config keys are sampled over which ranges or choices, read
-from YAML (``configs/spaces/``) and checked against the config before any trial runs.
+"""Search spaces of a study (docs/model/learning.md §13): which config keys are sampled over which ranges or choices,
+read from YAML (``configs/spaces/``) and checked against the config before any trial runs.
 """
 
 from __future__ import annotations

@@ -37,7 +37,7 @@ def tpe_sampler(recipe: Recipe, seed: int | None = None) -> optuna.samplers.Base
 
 
 def _pruner(recipe: Recipe) -> optuna.pruners.BasePruner:
-    if not recipe.prune or recipe.objective == "tte":  # learning.md 13: no pruning with time_to_end
+    if not recipe.prune or recipe.objective == "tte":  # docs/model/learning.md §13: no pruning with time_to_end
         return optuna.pruners.NopPruner()
     return optuna.pruners.MedianPruner(n_startup_trials=recipe.prune_startup, n_warmup_steps=recipe.prune_warmup)
 

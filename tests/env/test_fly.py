@@ -238,7 +238,7 @@ def test_a_real_end_on_the_last_allowed_step_terminates_instead_of_truncating():
     scene(env, [[104.0, 204.0]], [[10.5, 20.5]])  # reaches its goal exactly when the clock runs out
     _, _, term, trunc, info = act(env, 0.0, 0.0)
     assert bool(term[0]) and not bool(trunc[0])
-    assert REASONS[int(info["episode_stats"]["reason"][0])] == "timeout"  # the record keeps the spec's precedence
+    assert REASONS[int(info["episode_stats"]["reason"][0])] == "timeout"  # the precedence of docs/model/agents.md §9
 
 
 def test_step_before_reset_is_an_error():

@@ -1,5 +1,5 @@
-"""Planner env (agents.md 13): step limit, action -> goal mapping, each reward term on a constructed decision,
-candidates from the detected-fire map, the heuristic baseline on the same episodes as the planner."""
+"""Planner env (docs/model/agents.md §13): step limit, action -> goal mapping, each reward term on a constructed
+decision, candidates from the detected-fire map, the heuristic baseline on the same episodes as the planner."""
 
 from pathlib import Path
 
@@ -200,8 +200,8 @@ def test_greedy_heuristic_sends_drones_to_known_fires_without_sharing_one():
 
 @pytest.mark.parametrize("home", ["original", "fixed"])
 def test_greedy_fire_on_the_groundstation_cell_is_put_out_only_with_the_fix(home):
-    # agents.md 10.2: the fire's centre equals the groundstation's, so the original's "wait at the groundstation"
-    # branch re-takes that fire every step and the drop is never reached; the fix lets the drone drop.
+    # docs/model/agents.md §10.2: the fire's centre equals the groundstation's, so the original's "wait at the
+    # groundstation" branch re-takes that fire every step and the drop is never reached; the fix lets the drone drop.
     cfg = Config(ignition=IgnitionConfig(fire_percentage=0.0), drones=DroneConfig(num_drones=4),
                  wind=WindConfig(speed=0.0))
     pc = PlannerConfig(interval=1, fly_model=MODEL, explorer_model=MODEL, num_explorers=2, greedy_home=home)

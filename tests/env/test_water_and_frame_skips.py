@@ -1,4 +1,5 @@
-"""FlyAgent env: the finite water tank (agents.md 14) and frame skipping (agents.md 12) on constructed scenes."""
+"""FlyAgent env: the finite water tank (docs/model/agents.md §14) and frame skipping (docs/model/agents.md §12) on
+constructed scenes."""
 
 import math
 

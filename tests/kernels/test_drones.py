@@ -1,4 +1,4 @@
-"""Drone physics against hand-computed steps (agents.md 3-4)."""
+"""Drone physics against hand-computed steps (docs/model/agents.md §3-4)."""
 
 import numpy as np
 import pytest

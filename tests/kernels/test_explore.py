@@ -1,4 +1,4 @@
-"""ExploreAgent meander, waypoint advancing and the fire map (agents.md 11) against hand-worked values."""
+"""ExploreAgent meander, waypoint advancing and the fire map (docs/model/agents.md §11) against hand-worked values."""
 
 import numpy as np
 import pytest

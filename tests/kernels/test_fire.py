@@ -54,7 +54,7 @@ def test_barrier_classes_never_burn(barrier):
 
 
 def test_fire_does_not_cross_a_wide_water_channel():
-    # Grass west of a 100 m channel; a strong wind blows east, straight at it (firespin.md 7: convection
+    # Grass west of a 100 m channel; a strong wind blows east, straight at it (docs/model/fire.md §7: convection
     # particles drift ~10 m, radiation particles reach ~17 m on CLC+ classes).
     classes = np.full((30, 50), 6)
     classes[:, 20:30] = 10
@@ -166,8 +166,8 @@ def test_generator_lights_the_requested_number_of_fires(pattern):
 
 
 def test_thesis_era_generator_lights_at_most_the_requested_fires():
-    # firespin.md 11: without re-seeding each cluster is a self-avoiding walk that stops when trapped. A port of the
-    # thesis-era C++ generator lights a median of ~180-200 of the 441 fires (35 %, 2 clusters, 35x36_Woods).
+    # docs/model/fire.md §11: without re-seeding each cluster is a self-avoiding walk that stops when trapped. A port of
+    # the thesis-era C++ generator lights a median of ~180-200 of the 441 fires (35 %, 2 clusters, 35x36_Woods).
     land = load_map("35x36_Woods")
     thesis = FireSim(land, ignition=IgnitionConfig(fire_percentage=0.35, reseed=False), num_envs=400, seed=11)
     thesis.reset()

@@ -1,4 +1,4 @@
-"""The kernels' cell state machine against a small NumPy model of firespin.md 3-4 and 8.
+"""The kernels' cell state machine against a small NumPy model of docs/model/fire.md §3-4 and §8.
 
 Particles are off; exposure is prescribed (random cells "visited" each update) and water is dropped on random
 cells, so every transition (exposure, pruning, ignition, burning, burn-out, flooding, flood end) is exercised.

@@ -1,5 +1,6 @@
-"""Evaluation reporting (agents.md 15, learning.md 11-12): per-episode records -> summary statistics, tables, CSV,
-JSON and plots. Pure numpy + matplotlib (an Agg canvas per figure, no pyplot state); no Taichi, no torch.
+"""Evaluation reporting (docs/model/agents.md §15, docs/model/learning.md §11-12): per-episode records -> summary
+statistics, tables, CSV, JSON and plots. Pure numpy + matplotlib (an Agg canvas per figure, no pyplot state); no
+Taichi, no torch.
 
 One module per trade: ``episodes`` (columns and validation), ``stats`` (intervals and summaries), ``tables``,
 ``files`` (CSV and JSON), ``plots`` and ``scalars`` (TensorBoard reading). This package re-exports their public

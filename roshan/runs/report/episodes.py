@@ -1,5 +1,5 @@
-"""Episode sets of an evaluation (agents.md 15): the columns, their validation into typed numpy arrays, and each
-episode's outcome category (success or a failure reason).
+"""Episode sets of an evaluation (docs/model/agents.md §15): the columns, their validation into typed numpy arrays, and
+each episode's outcome category (success or a failure reason).
 """
 
 import math
@@ -8,7 +8,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 REASONS = ("none", "timeout", "boundary", "burnout", "collision")
-# The reference's FailureReason names (agents.md 2): the CSV uses them so files compare with the original's.
+# The reference's FailureReason names (docs/model/agents.md §2): the CSV uses them so files compare with the original's.
 CSV_REASON_NAMES = {"none": "None", "timeout": "Timeout", "boundary": "BoundaryExit", "burnout": "Burnout",
                     "collision": "Collision"}
 _REASON_ALIASES = {**{r: r for r in REASONS}, **{name.lower(): r for r, name in CSV_REASON_NAMES.items()}}
@@ -19,7 +19,8 @@ _REQUIRED = ("time", "success", "reason")
 _OPTIONAL = ("reward", "burned", "burning", "lit", "extinguished", "seed", "episode")
 FRACTIONS = ("burned", "burning", "lit")
 # Outcome categories in display order. "unspecified" is a failed episode whose reason is "none": the reference
-# takes the reason of the last terminal agent, which can be None although another agent failed (agents.md 2).
+# takes the reason of the last terminal agent, which can be None although another agent failed
+# (docs/model/agents.md §2).
 ALWAYS_REPORTED = ("collision", "boundary", "timeout")
 IF_PRESENT = ("burnout", "unspecified")
 LABELS = {"success": "Success", "collision": "Collision", "boundary": "Boundary", "timeout": "Timeout",

@@ -1,4 +1,4 @@
-"""An evaluation's files (learning.md 12): the per-episode CSV (``evaluation_stats.csv``, in the reference's
+"""An evaluation's files (docs/model/learning.md §12): the per-episode CSV (``evaluation_stats.csv``, in the reference's
 column and reason names) read and written, and the summary as JSON; written atomically.
 """
 
@@ -21,7 +21,7 @@ _VALUE_COLUMNS = (("Reward", "reward"), ("Time", "time"), ("Percent_Burned", "bu
 
 
 def write_episodes_csv(episodes: Mapping[str, Sequence], path: str | os.PathLike) -> Path:
-    """Writes ``evaluation_stats.csv`` (learning.md 12), atomically.
+    """Writes ``evaluation_stats.csv`` (docs/model/learning.md §12), atomically.
 
     Columns: ``Episode, [Reward], Time, [Percent_Burned, Burning_Fraction, Lit_Fraction, Extinguished], Success,
     Failure_Reason, [Seed]``, bracketed ones where the episodes have them (no Reward for a controller that earns

@@ -1,5 +1,5 @@
-"""Plots of evaluations (learning.md 12) as PNGs: one run's outcomes, times to end and rewards, a policy against
-its baselines, and learning curves. An Agg canvas per figure, no pyplot state.
+"""Plots of evaluations (docs/model/learning.md §12) as PNGs: one run's outcomes, times to end and rewards, a policy
+against its baselines, and learning curves. An Agg canvas per figure, no pyplot state.
 """
 
 import io
@@ -168,7 +168,7 @@ _REWARD_PLOTS = ("reward_vs_episode.png", "reward_vs_time.png")
 
 def plot_episodes(episodes: Mapping[str, Sequence], out_dir: str | os.PathLike,
                   reasons: Sequence[str] = ALWAYS_REPORTED, who: str | None = None) -> list[Path]:
-    """The single-run plots of learning.md 12, as PNGs in ``out_dir``.
+    """The single-run plots of docs/model/learning.md §12, as PNGs in ``out_dir``.
 
     Files: failure_reasons_bar.png (outcome counts, None shown as Success), time_to_end_hist.png,
     time_to_end_ecdf.png, reward_vs_episode.png, overall_success_bar.png (Wilson 95 % CI as error bar),

@@ -1,5 +1,5 @@
-"""Statistics of an evaluation (agents.md 15, learning.md 11): Wilson and t intervals (no scipy), per-episode
-descriptions, the summary of an episode set and its ``Evaluation/*`` TensorBoard scalars.
+"""Statistics of an evaluation (docs/model/agents.md §15, docs/model/learning.md §11): Wilson and t intervals (no
+scipy), per-episode descriptions, the summary of an episode set and its ``Evaluation/*`` TensorBoard scalars.
 """
 
 import math
@@ -139,7 +139,7 @@ def _failure_counts(ep: dict[str, np.ndarray], reasons: Sequence[str] = ALWAYS_R
 
 def summarize(episodes: Mapping[str, Sequence], confidence: float = 0.95, reasons: Sequence[str] = ALWAYS_REPORTED,
               dt: float | None = None) -> dict:
-    """Aggregates of an evaluation (agents.md 15), JSON-able.
+    """Aggregates of an evaluation (docs/model/agents.md §15), JSON-able.
 
     Args:
         episodes: an episode set as described in :func:`validate_episodes`.
@@ -178,8 +178,8 @@ def summarize(episodes: Mapping[str, Sequence], confidence: float = 0.95, reason
 
 
 def evaluation_scalars(summary: dict) -> dict[str, float]:
-    """The ``Evaluation/*`` TensorBoard scalars of learning.md 11 from a :func:`summarize` result, plus the rate
-    of each failure reason (``Evaluation/<Reason>_rate``)."""
+    """The ``Evaluation/*`` TensorBoard scalars of docs/model/learning.md §11 from a :func:`summarize` result, plus the
+    rate of each failure reason (``Evaluation/<Reason>_rate``)."""
     scalars = {"Evaluation/Success_rate": summary["success_rate"],
                "Evaluation/Success_ci_low": summary["success_ci"][0],
                "Evaluation/Success_ci_high": summary["success_ci"][1], "Evaluation/Success_n": summary["episodes"]}
