@@ -11,7 +11,22 @@ from roshan.config import load_config
 
 ARCH = click.option("--arch", type=click.Choice(["cpu", "cuda", "vulkan", "auto"]), default=None,
                     help="Where kernels run (default: config's sim.arch, cpu).")
-THREADS = click.option("--threads", type=click.IntRange(min=1), default=None, help="CPU threads (default: all).")
+
+
+def _check_threads(ctx, param, value):
+    """--threads above the machine's cores is allowed but said: it runs slower, not faster."""
+    if value is None:
+        return value
+    from roshan.runtime import threads_warning  # taichi: imported only when the option is given
+
+    warning = threads_warning(value)
+    if warning:
+        click.echo(warning, err=True)
+    return value
+
+
+THREADS = click.option("--threads", type=click.IntRange(min=1), default=None, callback=_check_threads,
+                       help="CPU threads (default: all cores; more than the machine has run slower).")
 SETS = click.option("--set", "sets", multiple=True, metavar="KEY=VALUE",
                     help="Override a config key, e.g. --set fire.dt=0.05 (repeatable).")
 CONFIG = click.option("--config", "-c", "config_path", type=click.Path(dir_okay=False), default=None,
@@ -82,12 +97,13 @@ def simulate(config_path, map_name, envs, steps, seed, fire_percentage, clusters
     if policy is not None and drones is None:
         raise click.UsageError("--policy needs --drones N (without drones only the fire is simulated)")
 
-    flags = {"map.name": map_name, "sim.envs": envs, "sim.seed": seed, "ignition.fire_percentage": fire_percentage,
-             "ignition.clusters": clusters, "ignition.pattern": pattern, "wind.speed": wind_speed,
-             "wind.direction": wind_direction, "sim.arch": arch, "sim.threads": threads}
-    overrides = [f"{k}={v}" for k, v in flags.items() if v is not None] + list(sets)
-    with reported():
-        cfg = load_config(config_path, overrides)
+    options = {"map.name": ("--map", map_name), "sim.envs": ("--envs", envs), "sim.seed": ("--seed", seed),
+               "ignition.fire_percentage": ("--fire-percentage", fire_percentage),
+               "ignition.clusters": ("--clusters", clusters), "ignition.pattern": ("--pattern", pattern),
+               "wind.speed": ("--wind-speed", wind_speed), "wind.direction": ("--wind-direction", wind_direction),
+               "sim.arch": ("--arch", arch), "sim.threads": ("--threads", threads)}
+    with reported():  # an error names the option that gave the value (--wind-speed), --set, or the config file
+        cfg = load_config(config_path, list(sets), flags={k: v for k, v in options.items() if v[1] is not None})
         sim_mod.prepare_outputs(Path(frames) if frames else None, Path(gif) if gif else None,
                                 Path(json_path) if json_path else None, replace=replace)
         frames_path, gif_path = Path(frames) if frames else None, Path(gif) if gif else None
@@ -198,17 +214,17 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
     from roshan.config import load_run_config
     from roshan.runs import train as tr
 
-    flags = {"sim.arch": arch, "sim.threads": threads}
-    overrides = [f"{k}={v}" for k, v in flags.items() if v is not None] + list(sets)
+    options = {"sim.arch": ("--arch", arch), "sim.threads": ("--threads", threads)}
+    options = {k: v for k, v in options.items() if v[1] is not None}
     with reported(RunBusy):
         if resume_dir is not None:
             if config_path is not None:
                 raise click.UsageError("give either CONFIG or --resume RUN (a resumed run keeps its config)")
             run_dir = Path(resume_dir)
-            cfg = tr.resume_config(run_dir, overrides)
+            cfg = tr.resume_config(run_dir, [f"{k}={v}" for k, (_, v) in options.items()] + list(sets))
             results = [tr.train(cfg, run_dir, resume=True, progress_bar=not quiet, evaluate_at_end=not no_eval)]
-        else:
-            cfg = load_run_config(config_path, overrides)
+        else:  # an error names where the bad value came from: CONFIG, --set or the option
+            cfg = load_run_config(config_path, list(sets), flags=options)
             results = tr.train_auto(cfg, root, name, progress_bar=not quiet, evaluate_at_end=not no_eval)
     for res in results:
         click.echo(tr.result_lines(res))

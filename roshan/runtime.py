@@ -137,6 +137,26 @@ def _source_lookups_once() -> None:
 _source_lookups_once()
 
 
+def cpu_cores() -> int:
+    """CPU cores this process may run on (its affinity mask, which containers and ``taskset`` narrow, else
+    ``os.cpu_count()``)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # no affinity masks (macOS)
+        return os.cpu_count() or 1
+
+
+def threads_warning(threads: int | None) -> str | None:
+    """A warning line when ``threads`` asks for more CPU threads than this machine has cores (they would only
+    take turns: ``--threads 999`` on 2 cores ran 2.5x slower than ``--threads 2``), else None."""
+    cores = cpu_cores()
+    if threads is None or threads <= cores:
+        return None
+    return (f"warning: --threads {threads} is more than the {cores} CPU core{'s' * (cores != 1)} this machine has; "
+            f"the extra threads only take turns on them and make the kernels slower, not faster (use --threads "
+            f"{cores} or less)")
+
+
 def current_arch() -> str | None:
     """The arch Taichi was initialised with by :func:`init_taichi`, or ``None``."""
     return _current.get("arch")  # type: ignore[return-value]

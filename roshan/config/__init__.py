@@ -90,12 +90,14 @@ def check_planner_ppo(ppo: PPOConfig) -> None:
                               f"planner (leave it at {getattr(default, key)!r}; the network is planner.network)")
 
 
-def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = (), cls: type = Config):
-    """A YAML config (or the defaults) plus ``section.key=value`` overrides, validated (errors name the file and
-    key); ``cls`` is the root :class:`Config` unless a caller loads one section on its own."""
+def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = (), cls: type = Config,
+                flags: dict | None = None):
+    """A YAML config (or the defaults) plus ``section.key=value`` overrides, validated (errors name the key and
+    where its value came from: the file, ``--set``, or the command's option of ``flags``, a dict dotted key ->
+    (option, value)); ``cls`` is the root :class:`Config` unless a caller loads one section on its own."""
     if cls is not Config:
-        return schema.load_config(path, overrides, cls=cls)
-    return schema.load_config(path, overrides, cls=cls, upgrade=upgrade_config_dict, moved=MOVED_KEYS)
+        return schema.load_config(path, overrides, cls=cls, flags=flags)
+    return schema.load_config(path, overrides, cls=cls, upgrade=upgrade_config_dict, moved=MOVED_KEYS, flags=flags)
 
 
 def apply_overrides(cfg, overrides: list[str] | tuple[str, ...], where: str = "--set"):

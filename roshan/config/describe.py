@@ -4,6 +4,7 @@ The doc is the field's ``doc=`` (``num``/``choice``), else the comment on its li
 
 import ast
 import dataclasses
+import difflib
 import functools
 import inspect
 import io
@@ -12,7 +13,7 @@ import tokenize
 import types
 import typing
 
-from roshan.config.schema import ConfigError, suggest
+from roshan.config.schema import ALIASES, ConfigError
 
 
 @functools.cache
@@ -104,11 +105,27 @@ def describe_keys(cls: type, section: str = "") -> list[dict]:
     picked = [r for r in rows if r["key"] == section or r["key"].startswith(section + ".")]
     if not picked:
         names = [n for n, _ in sections(cls) if n]
-        hint = suggest(section, names + [r["key"] for r in rows])
-        if "did you mean" not in hint:
-            hint = f"; sections: {', '.join(names)}"
-        raise ConfigError(f"unknown config section {section!r}{hint}")
+        raise ConfigError(f"unknown config section {section!r}{_closest(section, names, [r['key'] for r in rows])}")
     return picked
+
+
+def _closest(name: str, section_names: list[str], keys: list[str]) -> str:
+    """"; did you mean 'x'?" for a section or key that is plausibly what ``name`` misspells, else what there is
+    to choose from: a name inside a known section (``fire.dtt``) is matched against that section's keys and
+    subsections (or they are listed), any other against the section names (or those are listed). A word that
+    resembles nothing ("nosuchsection") gets the list, never a far-off key."""
+    head, _, last = name.rpartition(".")
+    if head in section_names:
+        children = {n.rpartition(".")[2]: n for n in section_names + keys if n.rpartition(".")[0] == head}
+        alias = ALIASES.get(last)
+        close = [alias] if alias in children else difflib.get_close_matches(last, list(children), n=1, cutoff=0.6)
+        if close:
+            return f"; did you mean {children[close[0]]!r}?"
+        return f"; {head} has: {', '.join(children)}"
+    close = difflib.get_close_matches(name, section_names, n=1, cutoff=0.6)
+    if not close:
+        close = difflib.get_close_matches(name, keys, n=1, cutoff=0.8)
+    return f"; did you mean {close[0]!r}?" if close else f"; sections: {', '.join(section_names)}"
 
 
 def format_keys(cls: type, rows: list[dict]) -> str:

@@ -101,16 +101,19 @@ def check_field(f: dataclasses.Field, hint, value, where: str, key: str):
 
 
 def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = (), *, cls: type,
-                upgrade: Callable[[dict], dict] | None = None, moved: dict[str, str] | None = None):
+                upgrade: Callable[[dict], dict] | None = None, moved: dict[str, str] | None = None,
+                flags: dict[str, tuple[str, Any]] | None = None):
     """Load ``path`` (YAML) into ``cls``, apply ``key.sub=value`` overrides and validate everything; ``upgrade``
     brings the file's dict from an older layout first, and ``moved`` (old dotted key -> new) renames override
-    keys of that older layout.
+    keys of that older layout. ``flags`` (dotted key -> (option, value), e.g. ``{"wind.speed": ("--wind-speed",
+    -3.0)}``) are a command's own options for keys; they apply before the overrides.
 
     Raises:
-        ConfigError: naming the file, the key and what was expected.
+        ConfigError: naming where the bad value came from (the file, ``--set`` or the option), the key and what
+            was expected.
     """
     data: dict = {}
-    where = "--set" if overrides else "defaults"
+    where = "defaults"
     if path is not None:
         where = str(path)
         try:
@@ -129,9 +132,13 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
             raise ConfigError(f"{path}: expected a mapping of sections at the top level, got {type(data).__name__}")
     if upgrade is not None:
         data = upgrade(data)
+    origins: dict[str, str] = {}  # dotted key -> the option that set it last (an error names it, not the file)
+    for key, (option, value) in (flags or {}).items():
+        _set_key(data, key, value, cls)
+        origins[key] = option
     for item in overrides:
-        _apply_override(data, item, cls, moved or {})
-    return from_dict(cls, data, where=where)
+        origins[_apply_override(data, item, cls, moved or {})] = "--set"
+    return from_dict(cls, data, where=where, origins=origins)
 
 
 def apply_overrides(cfg, overrides: list[str] | tuple[str, ...], where: str = "--set",
@@ -143,8 +150,9 @@ def apply_overrides(cfg, overrides: list[str] | tuple[str, ...], where: str = "-
     return from_dict(type(cfg), data, where=where)
 
 
-def from_dict(cls: type, data: dict, where: str = "config", prefix: str = ""):
-    """Build dataclass ``cls`` from a nested dict; unknown keys, wrong types and out-of-range values raise."""
+def from_dict(cls: type, data: dict, where: str = "config", prefix: str = "", origins: dict[str, str] | None = None):
+    """Build dataclass ``cls`` from a nested dict; unknown keys, wrong types and out-of-range values raise, naming
+    ``where`` (or, for a dotted key in ``origins``, the option that set it)."""
     if not isinstance(data, dict):
         raise ConfigError(f"{where}: {prefix or 'top level'} must be a mapping, got {data!r}")
     fields = {f.name: f for f in dataclasses.fields(cls)}
@@ -158,9 +166,9 @@ def from_dict(cls: type, data: dict, where: str = "config", prefix: str = ""):
         hint = hints[name]
         full = f"{prefix}{name}"
         if dataclasses.is_dataclass(hint):
-            kwargs[name] = from_dict(hint, value if value is not None else {}, where, full + ".")
+            kwargs[name] = from_dict(hint, value if value is not None else {}, where, full + ".", origins)
         else:  # checked here to name the file; the section's own check then finds nothing more
-            kwargs[name] = check_field(fields[name], hint, value, where, full)
+            kwargs[name] = check_field(fields[name], hint, value, (origins or {}).get(full, where), full)
     return cls(**kwargs)
 
 
@@ -192,23 +200,32 @@ def all_keys(cls: type, prefix: str = "") -> list[str]:
     return keys
 
 
-def _apply_override(data: dict, item: str, cls: type, moved: dict[str, str]) -> None:
+def _apply_override(data: dict, item: str, cls: type, moved: dict[str, str]) -> str:
+    """Apply ``--set`` ``item`` to ``data``; the dotted key it set."""
     if "=" not in item:
         raise ConfigError(f"--set {item!r}: expected section.key=value")
     dotted, raw = item.split("=", 1)
     dotted = moved.get(dotted.strip(), dotted.strip())
-    parts = dotted.split(".")
     if dotted not in all_keys(cls):
         raise ConfigError(f"--set: unknown key {dotted.strip()!r}{suggest(dotted.strip(), all_keys(cls))}")
+    try:
+        value = yaml.safe_load(raw)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"--set {item!r}: cannot parse value ({exc})") from exc
+    _set_key(data, dotted, value, cls, f"--set {item!r}")
+    return dotted
+
+
+def _set_key(data: dict, dotted: str, value: Any, cls: type, where: str = "") -> None:
+    if dotted not in all_keys(cls):
+        raise ConfigError(f"{where or dotted}: unknown key {dotted!r}{suggest(dotted, all_keys(cls))}")
+    parts = dotted.split(".")
     node = data
     for p in parts[:-1]:
         node = node.setdefault(p, {})
         if not isinstance(node, dict):
-            raise ConfigError(f"--set {item!r}: {p!r} is not a section")
-    try:
-        node[parts[-1]] = yaml.safe_load(raw)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"--set {item!r}: cannot parse value ({exc})") from exc
+            raise ConfigError(f"{where or dotted}: {p!r} is not a section")
+    node[parts[-1]] = value
 
 
 # Names other RL libraries (Stable-Baselines3, CleanRL) use for our keys: string similarity alone would answer
