@@ -542,3 +542,33 @@ def test_the_e7_buffer_shares_no_fire_layout_with_its_evaluation():
     assert len(buffer) > 0.95 * envs * 6 and len(evaluation) > 0.95 * envs * 6  # distinct layouts, all lit
     assert not buffer & evaluation
     assert fire_layouts(cfg, envs, e7.eval_seed, 2) <= evaluation  # the same seed gives the same layouts
+
+
+REPRODUCED = "E1_ppo"  # a cheap row (~15 s a seed) rerun at the code of commit 69c2998 (`--rerun E1_ppo`)
+
+
+def test_a_committed_cheap_row_is_reproduced_by_this_code(tmp_path):
+    """Results are claims about code: rerunning a finished seed of a cheap committed row here gives its figures
+    exactly (same machine kind). A change of behaviour fails this; then rerun the row (`roshan experiment run
+    configs/experiments/thesis.yaml --only E1_ppo --rerun E1_ppo --threads 1`) and commit the journal."""
+    journal = tmp_path / "committed.journal"
+    journal.write_bytes((REPO / "benchmarks" / "results" / "thesis" / "experiment.journal").read_bytes())
+    thesis = load_spec(REPO / "configs" / "experiments" / "thesis.yaml")
+    study = optuna.load_study(study_name=thesis.name, storage=open_storage(str(journal), heartbeat=None))
+    cond = thesis.condition(REPRODUCED)
+    seed = cond.seeds[-1]
+    committed = results_of(study)[f"{REPRODUCED}/seed_{seed}"]
+    assert committed["code"]["commit"] and not committed["code"]["dirty"]
+    spec = tmp_path / "repro.yaml"
+    spec.write_text(json.dumps({"name": "repro", "eval": {"episodes": cond.eval_episodes, "seed": cond.eval_seed,
+                                                          "envs": cond.eval_envs},
+                                "conditions": {REPRODUCED: {"config": str(REPO / cond.config), "seeds": [seed],
+                                                            "set": list(cond.sets)}}}))
+    out = subprocess.run([sys.executable, "-m", "roshan", "experiment", "run", str(spec), "--root",
+                          str(tmp_path / "runs"), "--threads", "1"], env={**os.environ, "PYTHONPATH": str(REPO)},
+                         capture_output=True, text=True, timeout=900, cwd=REPO)
+    assert out.returncode == 0, out.stderr[-3000:]
+    again = json.loads((tmp_path / "runs" / "repro" / REPRODUCED / f"seed_{seed}" / "result.json").read_text())
+    for key in ("success_rate", "failure_rates", "tte_episodes", "episodes", "last", "objective"):
+        assert again[key] == committed[key], f"{key} differs from the committed row (made at {committed['code']})"
+    assert again["train"]["updates"] == committed["train"]["updates"]
