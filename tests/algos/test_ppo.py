@@ -333,3 +333,30 @@ def test_weight_average_survives_resume_and_is_what_a_weights_only_load_acts_wit
     del state["net_average"]
     with pytest.raises(ValueError, match="ema_decay"):
         fly_ppo(cfg, collision=True).load_state_dict(state)
+
+
+# The weights and logged metrics after three updates of each minibatch mode, with the mean bound and the KL stop:
+# recorded before PPO.update was rewritten for reading (issue 31), so the rewrite is shown to change nothing.
+UPDATE_PINS = {"samples": "100040a1", "sequences": "c3942e45"}
+
+
+def update_fingerprint(minibatch: str) -> str:
+    import hashlib
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(3)
+    cfg = PPOConfig(lr=3e-3, horizon=4 * 64, batch_size=64, k_epochs=3, use_tanh_dist=True, mean_bound=0.5,
+                    kl_early_stop=True, kl_target=0.02, max_grad_norm=0.5, minibatch=minibatch)
+    agent = fly_ppo(cfg, collision=True)
+    h = hashlib.sha256()
+    for _ in range(3):
+        metrics = agent.update(bandit_rollout(agent, 4, 64, g), g)
+        h.update(repr(sorted((k, round(v, 6)) for k, v in metrics.items() if v == v)).encode())
+    for v in agent.net.state_dict().values():
+        h.update(v.detach().contiguous().numpy().tobytes())
+    h.update(repr((agent.gradient_steps, agent.updates)).encode())
+    return h.hexdigest()[:8]
+
+
+@pytest.mark.parametrize("minibatch", ["samples", "sequences"])
+def test_an_update_is_pinned_bit_for_bit(minibatch):
+    assert update_fingerprint(minibatch) == UPDATE_PINS[minibatch]
