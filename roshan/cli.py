@@ -30,7 +30,7 @@ THREADS = click.option("--threads", type=click.IntRange(min=1), default=None, ca
 SETS = click.option("--set", "sets", multiple=True, metavar="KEY=VALUE",
                     help="Override a config key, e.g. --set fire.dt=0.05 (repeatable).")
 CONFIG = click.option("--config", "-c", "config_path", type=click.Path(dir_okay=False), default=None,
-                      help="YAML config (see configs/); defaults are the spec's.")
+                      help="YAML config (see configs/); defaults are the model's (docs/model/).")
 
 
 def _fail(exc: Exception) -> None:

@@ -1,7 +1,7 @@
 """How config sections are declared, loaded and validated: ``num``/``choice`` fields, YAML loading, ``--set``
 overrides and one validator.
 
-Every section is a frozen dataclass whose defaults are the spec's (``shared/spec/``). Each field declares its
+Every section is a frozen dataclass whose defaults are the model's (``docs/model/``). Each field declares its
 allowed range in ``metadata`` so one validator checks them all and errors name the key. Sections derive from
 :class:`Section`, which runs that validator on construction: a config built in Python (``FlyConfig(frames=0)``)
 fails as the same key in a YAML file or ``--set`` would, instead of crashing a kernel later.
