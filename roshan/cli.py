@@ -288,8 +288,11 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, replace, f
                                   gif_path=Path(gif_path) if gif_path else None, which=which,
                                   progress_bar=not quiet, overrides=sets, baseline=baseline, replace=replace)
     title = f"{target} ({Path(summary['checkpoint']).stem}, seed {seed})"
-    if baseline is not None:
-        click.echo(format_comparison({"policy": summary, baseline: summary["baseline"]}, title))
+    if baseline is not None:  # the column says which baseline played (the planner's greedy: original or fixed)
+        click.echo(format_comparison({"policy": summary, summary.get("baseline_name", baseline): summary["baseline"]},
+                                     title))
+        if summary.get("baseline_note"):
+            click.echo(summary["baseline_note"])
     else:
         click.echo(format_table(summary, title))
     click.echo(f"files: {summary['out_dir']}")

@@ -20,7 +20,7 @@ from roshan.algos.buffers import ReplayBuffer
 from roshan.algos.frozen import check_setting, load_agent, policy_fn
 from roshan.algos.networks import flatten_drones
 from roshan.checkpoints import folder_lock, resolve_checkpoint
-from roshan.config import apply_overrides
+from roshan.config import Config, apply_overrides
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import straight_to_goal
 from roshan.episode import EPISODE_FIELDS, FIRE_FIELDS, REASONS, RECORD_FIELDS
@@ -120,6 +120,23 @@ def _save_frame(picture: np.ndarray, frames_dir: Path, k: int) -> None:
 
 
 BASELINES = ("random", "greedy")
+# Which greedy heuristic a planner evaluation plays (planner.greedy_home), as its tables and JSON name it.
+GREEDY_HOME_NOTES = {
+    "original": "the original's heuristic, defect included: a fire on the groundstation cell is re-taken every step "
+                "and never put out, so the heuristic times out whenever that cell burns "
+                "(--set planner.greedy_home=fixed plays the fixed one)",
+    "fixed": "the heuristic with the original's groundstation defect fixed: a fire on the groundstation cell is put "
+             "out like any other",
+}
+
+
+def baseline_name(baseline: str, cfg: Config, planner: bool) -> tuple[str, str]:
+    """(column name, note) of ``baseline`` in a comparison: the planner's greedy says which heuristic it plays
+    (``greedy (original)`` or ``greedy (fixed)``, :data:`GREEDY_HOME_NOTES`); other baselines are their name."""
+    if baseline == "greedy" and planner:
+        home = cfg.planner.greedy_home
+        return f"greedy ({home})", f"greedy ({home}), planner.greedy_home = {home}: {GREEDY_HOME_NOTES[home]}"
+    return baseline, ""
 # Where training and evaluation differ by design, the learning curves say why.
 TRAINING_NOTES = {"planner": "Training episodes (Episodes/*) sample goals from the stochastic policy with the "
                              "explorers at the groundstation, and time out: success 0 by design. Evaluation "
@@ -354,12 +371,16 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         write_learning_curves(run_dir, out / "learning_curves.png", f"{run_dir.name}: {who}", cfg.train.algo, say)
         payload = flyagent_json(summary, env.failure_reasons)
         if base_eps is not None:
-            base = write_outputs(base_eps, out / baseline, f"{baseline} baseline ({len(base_eps['time'])} episodes, "
+            name, note = baseline_name(baseline, cfg, not env.flat_drones)
+            base = write_outputs(base_eps, out / baseline, f"{name} baseline ({len(base_eps['time'])} episodes, "
                                                              f"seed {seed})", provenance, reasons, dt,
-                               f"{baseline} baseline", say)
+                               f"{name} baseline", say)
             plot_comparison({who: eps, baseline: base_eps}, out, reasons=reasons)
             payload = {"policy": payload, baseline: flyagent_json(base, env.failure_reasons)}
             summary["baseline"] = base
+            summary["baseline_name"], summary["baseline_note"] = name, note
+            if baseline == "greedy" and not env.flat_drones:
+                payload[baseline]["greedy_home"] = cfg.planner.greedy_home
         payload["provenance"] = provenance
         if json_path is not None:
             with writing("the evaluation JSON", json_path):

@@ -40,7 +40,10 @@ def test_planner_trains_resumes_and_evaluates_against_greedy_on_the_same_episode
               "--gif", gif, "--quiet")
     assert res.exit_code == 0, res.output
     assert "greedy" in res.output and "TTE" in res.output
+    # the column and a note say which greedy heuristic played (issue 32, item 12)
+    assert "greedy (original)" in res.output and "planner.greedy_home = original" in res.output
     payload = json.loads(out.read_text())
+    assert payload["greedy"].pop("greedy_home") == "original"
     assert set(payload) == {"policy", "greedy", "provenance"}
     assert payload.pop("provenance")["baseline"] == "greedy"
     for part in payload.values():
@@ -59,3 +62,14 @@ def test_planner_trains_resumes_and_evaluates_against_greedy_on_the_same_episode
     assert not (folder / "greedy" / "reward_vs_episode.png").exists()
     assert gif.read_bytes()[:6] == b"GIF89a"
     assert [p.name for p in gif.parent.iterdir()] == ["episode.gif"]  # the GIF's frames were scratch files
+
+
+def test_the_planner_greedy_baseline_is_named_by_its_groundstation_rule():
+    from roshan.config import Config, PlannerConfig
+    from roshan.runs.evaluate import baseline_name
+
+    for home in ("original", "fixed"):
+        name, note = baseline_name("greedy", Config(planner=PlannerConfig(greedy_home=home)), planner=True)
+        assert name == f"greedy ({home})" and f"planner.greedy_home = {home}" in note
+    assert "never put out" in baseline_name("greedy", Config(planner=PlannerConfig(greedy_home="original")), True)[1]
+    assert baseline_name("greedy", Config(), planner=False) == ("greedy", "")  # the FlyAgent's straight-to-goal
