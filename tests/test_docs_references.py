@@ -23,8 +23,9 @@ CITATION = re.compile(rf"(?P<path>docs/[\w/.-]*?\w\.md)`?{SECTIONS}(?P<item>,\s*
 LINK = re.compile(rf"\]\((?P<path>[\w.-]+\.md)\){SECTIONS}")
 SECTION = re.compile(rf"§(?P<a>{NUM})(?:-(?P<b>{NUM}))?")
 HEADING = re.compile(rf"^#{{2,6}}\s+(?:\*\*)?(?P<n>{NUM})\.?\s", re.M)
-# The original's spec files, cited without docs/model/ (or as "spec README", "shared/spec", "spec item N").
-BARE = re.compile(r"(?<![\w/.-])(?:shared/spec/)?(?:firespin|agents|learning)\.md"
+# The original's spec files, cited without docs/model/ (or as "spec README", "shared/spec", "spec item N"); the
+# text of a Markdown link, [agents.md](docs/model/agents.md), is not a citation (its target is checked).
+BARE = re.compile(r"(?<![\w/.\[-])(?:shared/spec/)?(?:firespin|agents|learning)\.md"
                   r"|\bspec README\b|\bshared/spec\b|\bspec item \d+")
 
 SELF = Path(__file__).resolve()
