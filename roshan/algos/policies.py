@@ -6,7 +6,8 @@ A policy has ``net`` (the ``nn.Module`` whose parameters PPO optimises), ``share
 
 - ``critic_parameters()``: the value-only parameters (PPO clips the actor and critic groups separately);
 - ``sample(obs, generator, cache)``: a :class:`Sample` (env action, what the rollout stores, log-prob, value);
-- ``act_deterministic(obs, cache)``, ``value(obs)``, ``evaluate(obs, stored)`` (log-prob, entropy, value);
+- ``act_deterministic(obs, cache)``, ``value(obs)``, ``evaluate(obs, stored)``: a :class:`Scored` (log-prob,
+  entropy, value, and the policy's own loss term beside PPO's);
 - ``before_update(updates)`` (the manual log-std schedules), ``update_metrics()`` and ``new_cache()``;
 - ``novelty_dim`` and ``novelty_features(obs)``: the flat vector RND reads (docs/model/learning.md §15).
 """
@@ -36,6 +37,15 @@ class Sample(NamedTuple):
     value: torch.Tensor  # (B,)
 
 
+class Scored(NamedTuple):
+    """A policy's view of stored actions, with gradients: what the PPO loss needs."""
+
+    log_prob: torch.Tensor  # (B,)
+    entropy: torch.Tensor  # (B,)
+    value: torch.Tensor  # (B,)
+    penalty: torch.Tensor | float  # a loss term of the policy's own, added to PPO's (0.0 when it has none)
+
+
 class NoCache:
     """The acting cache of a policy without frame stacks: nothing to keep between steps."""
 
@@ -62,7 +72,6 @@ class FlyPolicy:
         self.squashed_entropy = cfg.use_tanh_dist and cfg.tanh_entropy == "squashed"
         self._saturated: list[float] = []
         self.bounds_mean = cfg.use_tanh_dist and cfg.mean_bound > 0.0
-        self._mean_excess: torch.Tensor | float = 0.0
         self._excess_log: list[float] = []
         self.novelty_dim = frames * AGENT_FEATURES
 
@@ -101,12 +110,12 @@ class FlyPolicy:
     def value(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         return self.net.critic(obs)
 
-    def evaluate(self, obs: dict[str, torch.Tensor], stored: torch.Tensor):
-        """Log-prob (B,), entropy (B,) and value (B,) of stored actions."""
+    def evaluate(self, obs: dict[str, torch.Tensor], stored: torch.Tensor) -> Scored:
+        """Log-prob (B,), entropy (B,), value (B,) of stored actions, and the mean-bound penalty."""
         mean, std, value = self.net(obs)
         return self._score(mean, std, value, stored)
 
-    def evaluate_columns(self, obs: dict[str, torch.Tensor], index: torch.Tensor, stored: torch.Tensor):
+    def evaluate_columns(self, obs: dict[str, torch.Tensor], index: torch.Tensor, stored: torch.Tensor) -> Scored:
         """:meth:`evaluate` of drone columns obs [T, c, F, ...] (stored [T * c, 2]) from their distinct frames
         (:func:`roshan.algos.frames.stack_index` gives ``index``): the same outputs as encoding every stack."""
         mean, std, value = self.forward_columns(obs, index)
@@ -123,22 +132,22 @@ class FlyPolicy:
         mean, std, value = self.net.from_frames(za, zc)
         return mean.flatten(0, 1), std, value.flatten(0, 1)
 
-    def _score(self, mean, std, value, stored):
+    def _score(self, mean, std, value, stored) -> Scored:
         dist = self.dist_class(mean, std)
         if self.dist_class is TanhNormal:  # the share of pre-tanh means in tanh's flat tails, for the logs
             self._saturated.append(float((mean.detach().abs() > SATURATED).float().mean()))
-        if self.bounds_mean:
-            self._mean_excess = F.relu(mean.abs() - self.cfg.mean_bound).pow(2).sum(-1).mean()
-            self._excess_log.append(float(self._mean_excess.detach()))
         entropy = dist.squashed_entropy() if self.squashed_entropy else dist.entropy()
-        return dist.log_prob_raw(stored), entropy, value
+        return Scored(dist.log_prob_raw(stored), entropy, value, self._mean_bound_penalty(mean))
 
-    def penalty(self) -> torch.Tensor | float:
-        """The loss term of the last evaluation beside PPO's (0 unless ``ppo.mean_bound``): the mean squared
-        excess of the pre-tanh means over the bound, times ``ppo.mean_bound_coef``. Beyond |mu| ~ 2.2 every
-        sample is the same full-speed action, so the surrogate has no gradient there and nothing else stops a
-        mean that neighbouring states push outwards (the collision FlyAgent's drift, BENCHMARKS)."""
-        excess, self._mean_excess = self._mean_excess, 0.0
+    def _mean_bound_penalty(self, mean: torch.Tensor) -> torch.Tensor | float:
+        """0.0 unless ``ppo.mean_bound``: the mean squared excess of the pre-tanh means over the bound, times
+        ``ppo.mean_bound_coef``. Beyond |mu| ~ 2.2 every sample is the same full-speed action, so the surrogate has
+        no gradient there and nothing else stops a mean that neighbouring states push outwards (the collision
+        FlyAgent's drift, BENCHMARKS)."""
+        if not self.bounds_mean:
+            return 0.0
+        excess = F.relu(mean.abs() - self.cfg.mean_bound).pow(2).sum(-1).mean()
+        self._excess_log.append(float(excess.detach()))
         return self.cfg.mean_bound_coef * excess
 
     def before_update(self, updates: int) -> None:
@@ -199,14 +208,11 @@ class PlannerPolicy:
     def value(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         return self.net.value(trim_candidates(obs))
 
-    def evaluate(self, obs: dict[str, torch.Tensor], stored: torch.Tensor):
-        return self.net.evaluate(trim_candidates(obs), stored)
+    def evaluate(self, obs: dict[str, torch.Tensor], stored: torch.Tensor) -> Scored:
+        return Scored(*self.net.evaluate(trim_candidates(obs), stored), 0.0)
 
     def before_update(self, updates: int) -> None:
         pass
-
-    def penalty(self) -> float:
-        return 0.0
 
     def update_metrics(self) -> dict[str, float]:
         return {}

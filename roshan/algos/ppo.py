@@ -18,7 +18,7 @@ from torch import nn
 from roshan.algos.frames import stack_index
 from roshan.algos.normalize import RewardScaler
 from roshan.algos.optim import make_optimizer, make_scheduler
-from roshan.algos.policies import FlyPolicy, PlannerPolicy, Sample
+from roshan.algos.policies import FlyPolicy, PlannerPolicy, Sample, Scored
 from roshan.algos.returns import gae
 from roshan.algos.rnd import RND
 from roshan.config import PPOConfig, RNDConfig
@@ -43,6 +43,15 @@ class Rollout(NamedTuple):
     truncations: torch.Tensor  # [T, B] bool
 
 
+class Minibatch(NamedTuple):
+    """One minibatch: ``score()`` evaluates its stored actions under the current policy (with gradients)."""
+
+    score: Callable[[], Scored]
+    old_log_probs: torch.Tensor
+    advantages: torch.Tensor
+    returns: torch.Tensor
+
+
 def approx_kl(old_logp: torch.Tensor, new_logp: torch.Tensor, estimator: str) -> torch.Tensor:
     """KL(old || new) estimated from samples of the old policy (Schulman, "Approximating KL divergence", 2020):
     k1 = mean(old - new) (unbiased, high variance), k2 = mean((r - 1) - log r) with r = new / old (always >= 0)."""
@@ -62,26 +71,25 @@ def normalized_advantages(adv: torch.Tensor) -> torch.Tensor:
     return (adv - adv.mean()) / (adv.std(unbiased=False) + 1e-8) if adv.numel() > 1 else adv * 0.0
 
 
-def minibatch_loss(cfg, new_logp: torch.Tensor, old_logp: torch.Tensor, entropy: torch.Tensor, value: torch.Tensor,
-                   adv: torch.Tensor, ret: torch.Tensor, stats: dict) -> torch.Tensor | None:
-    """The PPO loss of one minibatch (clipped surrogate, entropy bonus, value loss; docs/model/learning.md §6), its
-    terms appended to ``stats``; None when the approx-KL early stop triggers (only the KL is logged then). ``cfg``
-    is a PPO config (eps_clip, KL settings, coefficients)."""
-    log_ratio = (new_logp - old_logp).clamp(-10.0, 10.0)
-    ratio = log_ratio.exp()
+def policy_change(new_logp: torch.Tensor, old_logp: torch.Tensor, cfg) -> tuple[torch.Tensor, float, float]:
+    """The probability ratios new / old (log-ratio clamped to +-10), the approx KL(old || new) that the early stop
+    reads, and the share of ratios outside the clip range."""
+    ratio = (new_logp - old_logp).clamp(-10.0, 10.0).exp()
     with torch.no_grad():
         kl = float(approx_kl(old_logp, new_logp, cfg.kl_estimator))
-        clip_frac = float(((ratio - 1.0).abs() > cfg.eps_clip).float().mean())
-    stats["approx_kl"].append(kl)
-    if cfg.kl_early_stop and kl >= cfg.kl_target:
-        return None
+        return ratio, kl, float(((ratio - 1.0).abs() > cfg.eps_clip).float().mean())
+
+
+def ppo_loss(cfg, ratio: torch.Tensor, scored: Scored, adv: torch.Tensor, ret: torch.Tensor
+             ) -> tuple[torch.Tensor, dict[str, float]]:
+    """The loss of one minibatch (docs/model/learning.md §6): clipped surrogate - entropy bonus + value loss, plus
+    the policy's own term; and the terms' values for the logs."""
     actor_loss = clipped_surrogate(ratio, adv, cfg.eps_clip)
-    entropy = entropy.mean()
-    value_loss = (value - ret).pow(2).mean()
-    for k, v in (("actor_loss", actor_loss), ("value_loss", value_loss), ("entropy", entropy)):
-        stats[k].append(float(v.detach()))
-    stats["clip_fraction"].append(clip_frac)
-    return actor_loss - cfg.entropy_coeff * entropy + cfg.value_loss_coef * value_loss
+    entropy = scored.entropy.mean()
+    value_loss = (scored.value - ret).pow(2).mean()
+    loss = actor_loss - cfg.entropy_coeff * entropy + cfg.value_loss_coef * value_loss + scored.penalty
+    return loss, {"actor_loss": float(actor_loss.detach()), "value_loss": float(value_loss.detach()),
+                  "entropy": float(entropy.detach())}
 
 
 def clip_gradients(groups: dict, max_norm: float) -> dict[str, torch.Tensor]:
@@ -212,8 +220,21 @@ class PPO:
         self.policy.before_update(self.updates)
         intrinsic = self._intrinsic(rollout, generator) if self.rnd is not None else {}
         rewards, adv, ret = self.advantages(rollout, intrinsic.pop("rewards", None))
-        minibatches = self._sequence_minibatches if cfg.minibatch == "sequences" else self._sample_minibatches
-        stats = self._epochs(minibatches(rollout, adv, ret, generator))
+        epoch = self._column_epoch if cfg.minibatch == "sequences" else self._sample_epoch
+        stats: dict[str, list[float]] = {k: [] for k in ("actor_loss", "value_loss", "entropy", "approx_kl",
+                                                          "clip_fraction", *(f"grad_norm_{g}" for g in self.groups))}
+        self.net.train()
+        for _ in range(cfg.k_epochs):
+            for score, old_logp, mb_adv, mb_ret in epoch(rollout, adv, ret, generator):
+                scored = score()
+                ratio, kl, clip_fraction = policy_change(scored.log_prob, old_logp, cfg)
+                stats["approx_kl"].append(kl)
+                if cfg.kl_early_stop and kl >= cfg.kl_target:
+                    break  # the rest of this epoch is skipped; the next epoch still starts
+                loss, terms = ppo_loss(cfg, ratio, scored, normalized_advantages(mb_adv), mb_ret)
+                norms = self._gradient_step(loss)
+                for k, v in {**terms, "clip_fraction": clip_fraction, **norms}.items():
+                    stats[k].append(v)
         if self.average is not None:
             self.average.update(self.net)
         self.updates += 1
@@ -223,6 +244,18 @@ class PPO:
                    explained_variance=explained_variance(rollout.values, ret), **self.policy.update_metrics(),
                    lr=self.optimizers[0].param_groups[0]["lr"], epochs_steps=len(stats["actor_loss"]), **intrinsic)
         return out
+
+    def _gradient_step(self, loss: torch.Tensor) -> dict[str, float]:
+        """Backward, clip each parameter group, step every optimiser and schedule; the groups' norms."""
+        for o in self.optimizers:
+            o.zero_grad(set_to_none=True)
+        loss.backward()
+        norms = clip_gradients(self.groups, self.cfg.max_grad_norm)
+        for o, s in zip(self.optimizers, self.schedulers, strict=True):
+            o.step()
+            s.step()
+        self.gradient_steps += 1
+        return {f"grad_norm_{name}": float(norm) for name, norm in norms.items()}
 
     def _intrinsic(self, rollout: Rollout, generator: torch.Generator | None) -> dict:
         """RND (docs/model/learning.md §15): ``rnd.coef`` x the scaled novelty of each row's observation (the rollout
@@ -235,76 +268,30 @@ class PPO:
         loss = self.rnd.update(features, self.cfg.batch_size, generator)
         return {"rewards": bonus, "rnd_intrinsic": float(bonus.mean()), "rnd_loss": loss}
 
-    def _epochs(self, epochs: Iterator[Iterator[tuple]]) -> dict[str, list[float]]:
-        """Gradient steps over the minibatches of every epoch; the KL early stop abandons the rest of an epoch
-        (later epochs still start)."""
-        stats: dict[str, list[float]] = {k: [] for k in ("actor_loss", "value_loss", "entropy", "approx_kl",
-                                                          "clip_fraction", *(f"grad_norm_{g}" for g in self.groups))}
-        self.net.train()
-        for epoch in epochs:
-            for minibatch in epoch:
-                if not self._minibatch_step(*minibatch, stats):
-                    break
-        return stats
-
-    def _sample_minibatches(self, rollout: Rollout, adv, ret, generator) -> Iterator[Iterator[tuple]]:
-        """k epochs of minibatches of shuffled transitions (docs/model/learning.md §6.2 step 6)."""
-        cfg = self.cfg
+    def _sample_epoch(self, rollout: Rollout, adv, ret, generator) -> Iterator[Minibatch]:
+        """One epoch of minibatches of shuffled transitions (docs/model/learning.md §6.2 step 6)."""
         flat = lambda x: x.flatten(0, 1)  # noqa: E731  [T, B, ...] -> [T * B, ...]
         obs = {k: flat(v) for k, v in rollout.obs.items()}
-        actions, old_logp, adv_f, ret_f = flat(rollout.actions), flat(rollout.log_probs), flat(adv), flat(ret)
-        n = old_logp.shape[0]
+        actions, old_logp, adv, ret = flat(rollout.actions), flat(rollout.log_probs), flat(adv), flat(ret)
+        order = torch.randperm(old_logp.shape[0], generator=generator, device="cpu").to(self.device)
+        for idx in order.split(self.cfg.batch_size):
+            score = partial(self.policy.evaluate, {k: v[idx] for k, v in obs.items()}, actions[idx])
+            yield Minibatch(score, old_logp[idx], adv[idx], ret[idx])
 
-        def epoch(order: torch.Tensor):
-            for start in range(0, n, cfg.batch_size):
-                idx = order[start:start + cfg.batch_size]
-                evaluate = partial(self.policy.evaluate, {k: v[idx] for k, v in obs.items()}, actions[idx])
-                yield evaluate, old_logp[idx], adv_f[idx], ret_f[idx]
-
-        for _ in range(cfg.k_epochs):
-            yield epoch(torch.randperm(n, generator=generator, device="cpu").to(self.device))
-
-    def _sequence_minibatches(self, rollout: Rollout, adv, ret, generator) -> Iterator[Iterator[tuple]]:
-        """k epochs of minibatches of whole FlyAgent drone columns [T, c]: each distinct frame of a column is
+    def _column_epoch(self, rollout: Rollout, adv, ret, generator) -> Iterator[Minibatch]:
+        """One epoch of minibatches of whole FlyAgent drone columns [T, c]: each distinct frame of a column is
         encoded once and the stacks are gathered from those embeddings (:func:`stack_index`), which gives the
         same network outputs as encoding every stack, with a third of the encoder work for 3 frames."""
-        cfg = self.cfg
         T, B = rollout.log_probs.shape
-        frames = rollout.obs["agent"].shape[2]
         ended = rollout.terminations | rollout.truncations
         restart = torch.cat([torch.zeros_like(ended[:1]), ended[:-1]])  # obs[t] starts an episode
-        index = stack_index(restart, frames)  # [T, B, F]
-        cols_per_mb = max(1, cfg.batch_size // T)
-
-        def epoch(order: torch.Tensor):
-            for start in range(0, B, cols_per_mb):
-                cols = order[start:start + cols_per_mb]
-                obs = {k: v[:, cols] for k, v in rollout.obs.items()}
-                pick = lambda x, c=cols: x[:, c].flatten(0, 1)  # noqa: E731
-                evaluate = partial(self.policy.evaluate_columns, obs, index[:, cols], pick(rollout.actions))
-                yield evaluate, pick(rollout.log_probs), pick(adv), pick(ret)
-
-        for _ in range(cfg.k_epochs):
-            yield epoch(torch.randperm(B, generator=generator, device="cpu").to(self.device))
-
-    def _minibatch_step(self, evaluate: Callable, old_logp, adv, ret, stats) -> bool:
-        """One gradient step; returns False (and takes no step) when the KL early stop triggers."""
-        new_logp, entropy, value = evaluate()
-        loss = minibatch_loss(self.cfg, new_logp, old_logp, entropy, value, normalized_advantages(adv), ret, stats)
-        penalty = self.policy.penalty()  # taken even when the KL stop skips the step, so none is left over
-        if loss is None:
-            return False
-        loss = loss + penalty
-        for o in self.optimizers:
-            o.zero_grad(set_to_none=True)
-        loss.backward()
-        for name, norm in clip_gradients(self.groups, self.cfg.max_grad_norm).items():
-            stats[f"grad_norm_{name}"].append(float(norm))
-        for o, s in zip(self.optimizers, self.schedulers, strict=True):
-            o.step()
-            s.step()
-        self.gradient_steps += 1
-        return True
+        index = stack_index(restart, rollout.obs["agent"].shape[2])  # [T, B, F]
+        order = torch.randperm(B, generator=generator, device="cpu").to(self.device)
+        for cols in order.split(max(1, self.cfg.batch_size // T)):
+            pick = lambda x, c=cols: x[:, c].flatten(0, 1)  # noqa: E731
+            score = partial(self.policy.evaluate_columns, {k: v[:, cols] for k, v in rollout.obs.items()},
+                            index[:, cols], pick(rollout.actions))
+            yield Minibatch(score, pick(rollout.log_probs), pick(adv), pick(ret))
 
     # ------------------------------------------------------------------------------------------ state
 

@@ -274,15 +274,12 @@ def test_mean_bound_penalty_is_the_squared_excess_once():
         agent.net.mu.weight.zero_()
         agent.net.mu.bias.copy_(torch.tensor([4.5, -1.0]))
     obs = bandit_obs(6, torch.zeros(6, 2))
-    agent.policy.evaluate(obs, torch.zeros(6, 2))
-    penalty = agent.policy.penalty()
+    penalty = agent.policy.evaluate(obs, torch.zeros(6, 2)).penalty
     assert float(penalty.detach()) == pytest.approx(2.0 * 1.5**2)
     penalty.backward()
     assert agent.net.mu.bias.grad.tolist() == pytest.approx([2.0 * 2 * 1.5, 0.0])  # pulls only the first mean in
-    assert agent.policy.penalty() == 0.0  # taken once per evaluation
     off = fly_ppo(PPOConfig(use_tanh_dist=False, mean_bound=3.0), collision=False)
-    off.policy.evaluate(obs, torch.zeros(6, 2))
-    assert off.policy.penalty() == 0.0  # the Gaussian's mean is tanh(mu) already
+    assert off.policy.evaluate(obs, torch.zeros(6, 2)).penalty == 0.0  # the Gaussian's mean is tanh(mu) already
 
 
 def floats(net: torch.nn.Module) -> dict[str, torch.Tensor]:
