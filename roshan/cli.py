@@ -74,7 +74,8 @@ def main():
 @click.option("--gif", type=click.Path(dir_okay=False), default=None, help="Stitch the frames into this GIF.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
               help="Write {config, series, timing} (and drones, with --drones) here.")
-@click.option("--replace", is_flag=True, help="Overwrite existing --gif / --json files (without it they are refused).")
+@click.option("--replace", is_flag=True, help="Overwrite existing --gif / --json files and the frames of a --frames "
+              "folder (without it they are refused).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--drones", type=int, default=None, metavar="N",
               help="Fly N drones per env (FlyAgent envs, complex policy: drones put out the nearest unreserved "

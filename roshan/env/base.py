@@ -175,11 +175,12 @@ class VectorEnvCore(gym.vector.VectorEnv):
         return self._viewer.render(self.caption())
 
     def caption(self) -> str:
-        """Env 0's caption: who flies, the episode index (as in episodes.csv), physics steps and simulated time
-        since the reset, and the cells burning now."""
+        """Env 0's caption: who flies, the episode number (1 for env 0's first episode since the env was reset
+        with a seed: the ``Episode`` of that episode in an evaluation's episodes.csv), physics steps and simulated
+        time since the reset, and the cells burning now."""
         steps = int(self.kernels.steps[0])
         burning = int(self.fire.stats()["burning"][0])
-        return (f"{self.caption_name} | episode {int(self.fire.episode[0])} | step {steps} | "
+        return (f"{self.caption_name} | episode {int(self.fire.episode[0]) + 1} | step {steps} | "
                 f"t = {steps * self.config.fire.dt:.1f} s | fires left {burning}")
 
     def close(self, **kwargs):

@@ -6,7 +6,7 @@ edge) and pixel column = grid column, ``cell_px`` pixels per cell:
 1. ``_paint_cells``: every pixel takes its cell's colour from a (state, original class) table. Class ids
    show their class colour, BURNING is (255, 0, 0), BURNED blends (42, 42, 42) with the original class colour
    20:1 and FLOODED blends (77, 187, 230) with it 40:1. No texture noise. Cells that water put out this
-   episode keep a blue tint once their flood has drained (``EXTINGUISHED_COLOUR``); with a detected-fire map
+   episode show one pale blue once their flood has drained (``EXTINGUISHED_COLOUR``); with a detected-fire map
    (``known_fires``) burning cells that no drone has seen are dimmed (``UNSEEN_FIRE_COLOUR``).
 2. ``_splat_particles`` (``particles=True``): each live particle of the env is alpha-blended into its own
    bounding box of pixels, in pool order (serial loop, so overlapping particles always blend the same way).
@@ -56,7 +56,7 @@ from PIL import Image
 from roshan.ggui import acquire_window, release_window
 from roshan.kernels.annotate import LegendItem, annotate
 from roshan.kernels.particles import P_X1, P_X2, P_Y, R_Y, radiation_position
-from roshan.maps import BURNED, BURNING, CLASSES, FLOODED
+from roshan.maps import BURNED, BURNING, CLASSES, FLOODED, class_histogram
 
 BACKENDS = ("auto", "ggui", "raster")
 TARGET_LONG_SIDE_PX = 720  # default frame size: the longer side of the map is about this many pixels
@@ -68,9 +68,10 @@ ARROW_BACKDROP_ALPHA = 0.65
 # Burning cells that no drone has seen yet (frames with a detected-fire map): a dim, greyed red, so the fires the
 # planner knows of (bright red) stand out from those it cannot know of.
 UNSEEN_FIRE_COLOUR = (150, 75, 75)
-# Cells that water put out keep a blue tint for the rest of the episode (a flood returns them to their class
-# colour, which would hide where the drones worked).
-EXTINGUISHED_COLOUR, EXTINGUISHED_ALPHA = (20, 50, 255), 0.7
+# Cells that water put out show this pale blue for the rest of the episode (a flood returns them to their class
+# colour, which would hide where the drones worked): one colour whatever the land below, as the legend shows it
+# (a tint over the class colour gave a different blue on each class), lighter than Water (50, 90, 255).
+EXTINGUISHED_COLOUR = (150, 165, 255)
 NO_GGUI_HINT = ("GGUI/Vulkan is unavailable, so frames are rendered with the raster fallback (numpy/PIL). "
                 "For GGUI install a Vulkan driver, e.g. `apt-get install -y mesa-vulkan-drivers` (Debian).")
 
@@ -260,7 +261,7 @@ class FrameRenderer:
     @ti.kernel
     def _paint_cells(self, env: ti.i32):
         cp = self.cell_px
-        ext = ti.Vector(EXTINGUISHED_COLOUR, ti.f32)
+        ext = ti.Vector(EXTINGUISHED_COLOUR, ti.u8)
         for py, px in self.image:
             c = (py // cp) * self.sim.cols + px // cp
             state = self.sim.cell_state(env, c)
@@ -269,7 +270,7 @@ class FrameRenderer:
                 if state == BURNING and self.known_fires[env, py // cp, px // cp] == 0:
                     colour = ti.Vector(UNSEEN_FIRE_COLOUR, ti.u8)
             if state != BURNING and state != FLOODED and self.sim.was_extinguished(env, c) != 0:
-                colour = blend(colour, ext, EXTINGUISHED_ALPHA)
+                colour = ext
             self.image[py, px] = colour
 
     @ti.kernel
@@ -518,6 +519,7 @@ class EnvZeroFrames:
         self.known_fires = known_fires
         self._renderer: FrameRenderer | None = None
         self._overlay: DroneOverlay | None = None
+        self._classes: tuple[int, ...] | None = None  # the map's land-cover classes, for the legend
 
     def render(self, caption: str | None = None) -> np.ndarray:
         """Env 0's map (H, W, 3) uint8; with ``caption``, a caption band above it and the legend below."""
@@ -530,34 +532,52 @@ class EnvZeroFrames:
         return annotate(frame, caption, self.legend())
 
     def legend(self) -> list[LegendItem]:
-        """What the marks and colours of this env's frames mean."""
-        colours = [tuple(int(v) for v in c) for c in drone_colours(self.drones.num_drones)]
-        items = [LegendItem("disc", c, f"drone {d}") for d, c in enumerate(colours[:8])]
-        if len(colours) > 8:
-            items.append(LegendItem("disc", colours[8], f"drones 8-{len(colours) - 1}"))
-        items += [LegendItem("square", colours[0], "its view"), LegendItem("cross", colours[0], "its goal")]
-        if self.explorers is not None:
-            items.append(LegendItem("diamond", EXPLORER_COLOUR, "explorer"))
-        items.append(LegendItem("square", GROUNDSTATION_COLOUR, "groundstation"))
-        table = cell_colours()
-        burning = tuple(int(v) for v in table[BURNING, 0])
-        if self.known_fires is not None:
-            items += [LegendItem("cell", burning, "fire, seen"), LegendItem("cell", UNSEEN_FIRE_COLOUR, "fire, unseen")]
-        else:
-            items.append(LegendItem("cell", burning, "fire"))
-        forest = np.array(CLASSES[2].colour, np.float64)
-        tint = np.rint(forest + EXTINGUISHED_ALPHA * (np.array(EXTINGUISHED_COLOUR) - forest)).astype(int)
-        items += [LegendItem("cell", tuple(int(v) for v in tint), "put out"),
-                  LegendItem("cell", tuple(int(v) for v in table[FLOODED, 2]), "flooded"),
-                  LegendItem("cell", tuple(int(v) for v in table[BURNED, 2]), "burned"),
-                  LegendItem("particle", (255, 200, 0), "fire particle")]
-        return items
+        """What the marks and colours of this env's frames mean (:func:`frame_legend`)."""
+        if self._classes is None:
+            self._classes = tuple(class_histogram(self.drones.fire.land_map))
+        return frame_legend(self.drones.num_drones, explorers=self.explorers is not None,
+                            known_fires=self.known_fires is not None, classes=self._classes)
 
     def close(self) -> None:
         """Release the window claim but keep the renderer: its fields and kernels are reused when the env's
         simulators are (roshan.kernels.pool), instead of allocating new ones at every env's first render."""
         if self._renderer is not None:
             self._renderer.close()
+
+
+BURNED_LABEL = "burned out"
+
+
+def frame_legend(num_drones: int = 0, explorers: bool = False, known_fires: bool = False,
+                 classes: tuple[int, ...] | list[int] = ()) -> list[LegendItem]:
+    """The legend of a frame: the drones (``num_drones``, 0 for the fire alone; with their view, goal and the
+    groundstation), the planner's ``explorers``, the fire (seen and unseen with a ``known_fires`` map), the
+    states water and fire leave (put out, flooded, burned out), fire particles, and each land-cover class of
+    ``classes`` (the map's class ids) in its colour under its CLC+ name, so that a grey Sealed cell is not read as
+    burned out."""
+    colours = [tuple(int(v) for v in c) for c in drone_colours(num_drones)]
+    items = [LegendItem("disc", c, f"drone {d}") for d, c in enumerate(colours[:8])]
+    if len(colours) > 8:
+        items.append(LegendItem("disc", colours[8], f"drones 8-{len(colours) - 1}"))
+    if colours:
+        items += [LegendItem("square", colours[0], "its view"), LegendItem("cross", colours[0], "its goal")]
+    if explorers:
+        items.append(LegendItem("diamond", EXPLORER_COLOUR, "explorer"))
+    if colours:
+        items.append(LegendItem("square", GROUNDSTATION_COLOUR, "groundstation"))
+    table = cell_colours()
+    burning = tuple(int(v) for v in table[BURNING, 0])
+    if known_fires:
+        items += [LegendItem("cell", burning, "fire, seen"), LegendItem("cell", UNSEEN_FIRE_COLOUR, "fire, unseen")]
+    else:
+        items.append(LegendItem("cell", burning, "fire"))
+    if colours:  # water: only drones drop it
+        items += [LegendItem("cell", EXTINGUISHED_COLOUR, "put out"),
+                  LegendItem("cell", tuple(int(v) for v in table[FLOODED, 2]), "flooded")]
+    items += [LegendItem("cell", tuple(int(v) for v in table[BURNED, 2]), BURNED_LABEL),
+              LegendItem("particle", (255, 200, 0), "fire particle")]
+    items += [LegendItem("cell", tuple(int(v) for v in table[c, c]), CLASSES[c].name) for c in classes]
+    return items
 
 
 def _arrow_geometry(height: int, width: int) -> tuple[float, float, float] | None:

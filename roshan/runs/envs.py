@@ -1,4 +1,7 @@
-"""The vector env a run trains or evaluates on, built from its config."""
+"""The vector env a run trains or evaluates on, built from its config, and how its frames name who flies."""
+
+import os
+from pathlib import Path
 
 from roshan.config import Config
 from roshan.env.fly import FlyVectorEnv
@@ -11,3 +14,17 @@ def make_env(cfg: Config, num_envs: int, seed: int, evaluation: bool = False, co
     if cfg.train.algo == "planner":
         return PlannerVectorEnv(num_envs, cfg, cfg.planner, evaluation=evaluation, controller=controller, seed=seed)
     return FlyVectorEnv(num_envs=num_envs, config=cfg, fly=cfg.fly, seed=seed)
+
+
+def caption_name(level: str, run_dir: Path) -> str:
+    """Who flies, for the caption of a trained run's frames: the level (``FlyAgent``, ``planner``) and the run
+    folder it was trained in, relative to the working directory where it lies below it (``planner from
+    models/planner``, not "planner model planner")."""
+    run_dir = Path(run_dir)
+    try:
+        where = Path(os.path.relpath(run_dir.resolve(), Path.cwd().resolve()))
+    except ValueError:  # another drive (Windows)
+        where = run_dir
+    if where.parts[:1] == ("..",):
+        where = Path(run_dir.name)
+    return f"{level} from {where.as_posix()}"

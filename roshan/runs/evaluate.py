@@ -26,7 +26,7 @@ from roshan.env.heuristics import straight_to_goal
 from roshan.episode import EPISODE_FIELDS, FIRE_FIELDS, REASONS, RECORD_FIELDS
 from roshan.io import OutputError, prepare_output, refuse_overwrite, write_gif, writing
 from roshan.runs.collect import next_observation
-from roshan.runs.envs import make_env
+from roshan.runs.envs import caption_name, make_env
 from roshan.runs.provenance import code_version, settings_hash
 from roshan.runs.report.files import write_episodes_csv, write_summary_json
 from roshan.runs.report.plots import plot_comparison, plot_episodes, plot_learning_curves
@@ -346,7 +346,7 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         prepare_outputs(out, json_path, frames_dir, gif_path, replace)
         provenance = _provenance(target, path, which, seed, episodes, E, overrides, baseline, arch)
         env = make_env(cfg, E, seed, evaluation=True)
-        env.caption_name = f"{env.default_caption_name} model {run_dir.name}"
+        env.caption_name = caption_name(env.default_caption_name, run_dir)
         scratch = None
         if gif_path is not None and frames_dir is None:  # frames only for the GIF: a scratch folder, removed after
             scratch = tempfile.TemporaryDirectory(prefix="roshan_frames_")

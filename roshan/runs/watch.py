@@ -18,7 +18,7 @@ from roshan.algos.networks import flatten_drones
 from roshan.config import apply_overrides
 from roshan.ggui import open_shown_window
 from roshan.io import prepare_output, refuse_overwrite, write_gif, writing
-from roshan.runs.envs import make_env
+from roshan.runs.envs import caption_name, make_env
 from roshan.runtime import ensure_taichi, torch_device
 
 
@@ -51,7 +51,7 @@ def watch(target: str | Path, steps: int | None = None, seed: int = 0, which: st
     check_setting(trained, cfg, path)
     run_dir = path.parent.parent if path.parent.name == "checkpoints" else path.parent
     env = make_env(cfg, 1, seed, evaluation=True)
-    env.caption_name = f"{env.default_caption_name} model {run_dir.name}"
+    env.caption_name = caption_name(env.default_caption_name, run_dir)
     env.keep_final_frame = True
     try:
         obs, _ = env.reset(seed=seed)

@@ -16,11 +16,12 @@ from pathlib import Path
 import numpy as np
 
 from roshan.config import Config, to_dict
-from roshan.io import prepare_output, refuse_overwrite, write_atomic, write_gif, writing
+from roshan.io import OutputError, prepare_output, refuse_overwrite, write_atomic, write_gif, writing
+from roshan.kernels.annotate import annotate
 from roshan.kernels.fire import FireSim
 from roshan.kernels.fire_records import N_STEP
-from roshan.kernels.render import FrameRenderer
-from roshan.maps import load_map
+from roshan.kernels.render import BURNED_LABEL, FrameRenderer, frame_legend
+from roshan.maps import class_histogram, load_map
 from roshan.runtime import init_taichi
 
 SERIES_KEYS = ("burning", "burned", "convection", "radiation", "dropped_convection", "dropped_radiation")
@@ -76,8 +77,10 @@ def run_simulation(cfg: Config, steps: int, every: int = 100, frames_dir: Path |
     sim.reset()
     result.series.append(record(sim, sim.step(0)))  # step(0) builds the update kernel here, not in the timed loop
     t_reset = time.perf_counter() - t0
+    legend = frame_legend(classes=tuple(class_histogram(sim.land_map))) if renderer is not None else []
     if renderer is not None:
-        result.frames.append(renderer.save_png(frames_dir / frame_name(0, 0.0)))
+        rec = result.series[0]
+        result.frames.append(save_frame(renderer.render(), frames_dir / frame_name(0, 0.0), fire_caption(rec), legend))
     sim_seconds = 0.0
     bar = progress_bar(steps, progress)
     done = 0
@@ -89,7 +92,8 @@ def run_simulation(cfg: Config, steps: int, every: int = 100, frames_dir: Path |
         done += n
         result.series.append(rec)
         if renderer is not None:
-            result.frames.append(renderer.save_png(frames_dir / frame_name(rec["step"], rec["time_s"])))
+            result.frames.append(save_frame(renderer.render(), frames_dir / frame_name(rec["step"], rec["time_s"]),
+                                            fire_caption(rec), legend))
         if bar is not None:
             bar.update(n)
             # means per env, as in the summary (a sum over envs grows with --envs)
@@ -97,9 +101,26 @@ def run_simulation(cfg: Config, steps: int, every: int = 100, frames_dir: Path |
                              "particles/env": f"{np.mean(rec['convection']) + np.mean(rec['radiation']):.0f}"})
     if bar is not None:
         bar.close()
-    finish_frames(renderer, result, gif, scratch, progress)
+    if renderer is not None:
+        renderer.close()
+    finish_frames(renderer is not None, result, gif, scratch, progress)
     result.timing = timing(steps, cfg.sim.envs, t_reset, sim_seconds, sim.memory_bytes_per_env(), t0)
     return result
+
+
+def fire_caption(rec: dict) -> str:
+    """The caption of a fire-only frame (env 0 of series record ``rec``), in the parts of the envs' captions."""
+    return (f"fire alone | step {rec['step']} | t = {rec['time_s']:.1f} s | burning {rec['burning'][0]} | "
+            f"{BURNED_LABEL} {rec['burned'][0]}")
+
+
+def save_frame(frame: np.ndarray, path: Path, caption: str, legend: list) -> Path:
+    """``frame`` with its caption band above and legend band below (as the envs' frames), as a PNG at ``path``."""
+    from PIL import Image
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(annotate(frame, caption, legend)).save(path)
+    return path
 
 
 def check_steps(steps: int, every: int) -> None:
@@ -110,9 +131,16 @@ def check_steps(steps: int, every: int) -> None:
 def prepare_outputs(frames_dir: Path | None, gif: Path | None, json_path: Path | None, replace: bool = False) -> None:
     """Create the output folders and check they can be written before anything is simulated: a run of hours
     must not end by losing its results to a missing or read-only folder. An existing GIF or JSON file is refused
-    unless ``replace`` (before anything is created)."""
+    unless ``replace`` (before anything is created), as is a --frames folder that already holds frames."""
     refuse_overwrite(gif, "the GIF", replace)
     refuse_overwrite(json_path, "the JSON series", replace)
+    if frames_dir is not None and not replace and any(Path(frames_dir).glob("frame_*.png")):
+        raise OutputError("frames", frames_dir, "the folder holds frames already; give --replace to overwrite them, "
+                                                "or name a new folder")
+    if frames_dir is not None and replace:  # the old run's frames go: a folder holds one run's frames
+        with writing("frames", frames_dir):
+            for old in Path(frames_dir).glob("frame_*.png"):
+                old.unlink()
     if frames_dir is not None:
         prepare_output(frames_dir, "frames")
     if gif is not None:
@@ -130,10 +158,10 @@ def frames_dir_or_scratch(frames_dir: Path | None) -> tuple[Path, Path | None]:
     return scratch, scratch
 
 
-def finish_frames(renderer, result: SimulationResult, gif: Path | None, scratch: Path | None = None,
+def finish_frames(rendered: bool, result: SimulationResult, gif: Path | None, scratch: Path | None = None,
                    progress: bool = False) -> None:
-    if renderer is not None:
-        renderer.close()
+    """Where frames were ``rendered``: stitch them into ``gif`` (when given) and remove the ``scratch`` folder."""
+    if rendered:
         try:
             if gif is not None:
                 if progress:
@@ -212,7 +240,8 @@ def _drone_lines(d: dict) -> list[str]:
 
 
 def frame_name(step: int, time_s: float, episode: int | None = None) -> str:
-    # Drone runs: env 0 restarts whenever its episode ends, so the name says which episode the frame shows.
+    # Drone runs: env 0 restarts whenever its episode ends, so the name says which episode the frame shows (1 for
+    # the first, as in the frame's caption).
     suffix = "" if episode is None else f"_ep{episode:04d}"
     return f"frame_{step:07d}_t{time_s:08.1f}s{suffix}.png"
 

@@ -15,7 +15,6 @@ import torch
 from roshan.config import Config, ConfigError, FlyConfig, replace, to_dict
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import POLICIES, policy_actions
-from roshan.kernels.render import FrameRenderer, drone_overlay
 from roshan.runtime import init_taichi
 from roshan.tools.simulate import (
     SERIES_KEYS,
@@ -82,10 +81,10 @@ def run_drone_simulation(cfg: Config, steps: int, drones: int, policy: str = "gr
         raise ConfigError(f"--drones: {exc}") from exc
     init_taichi(cfg.sim.arch, cfg.sim.threads or None)
     env, fly = _build_fly_env(cfg)
-    renderer = overlay = scratch = None
-    if frames_dir is not None or gif is not None:
+    rendering, scratch = frames_dir is not None or gif is not None, None
+    if rendering:  # env 0's frames as every env renders them: caption above the map, legend below
         frames_dir, scratch = frames_dir_or_scratch(frames_dir)
-        renderer, overlay = FrameRenderer(env.fire), drone_overlay(env.drones, 0)
+        env.caption_name = f"{drones} {policy} drone{'s' * (drones != 1)} (scripted)"
     result = SimulationResult()
     tally = _EpisodeTally(env)
     t0 = time.perf_counter()
@@ -94,9 +93,9 @@ def run_drone_simulation(cfg: Config, steps: int, drones: int, policy: str = "gr
     t_reset = time.perf_counter() - t0
 
     def save_frame(rec: dict) -> None:
-        if renderer is not None:
-            name = frame_name(rec["step"], rec["time_s"], episode=rec["episodes"][0])
-            result.frames.append(renderer.save_png(frames_dir / name, overlay=overlay))
+        if rendering:
+            name = frame_name(rec["step"], rec["time_s"], episode=rec["episodes"][0] + 1)
+            result.frames.append(save_png(env.render(), frames_dir / name))
 
     save_frame(result.series[0])
     step_seconds = 0.0
@@ -118,10 +117,18 @@ def run_drone_simulation(cfg: Config, steps: int, drones: int, policy: str = "gr
     if bar is not None:
         bar.close()
     env.close()
-    finish_frames(renderer, result, gif, scratch, progress)
+    finish_frames(rendering, result, gif, scratch, progress)
     result.timing = timing(steps, cfg.sim.envs, t_reset, step_seconds, env.fire.memory_bytes_per_env(), t0)
     result.drones = _drone_summary(result.series[-1], int(drones), policy, fly, env.t_max)
     return result
+
+
+def save_png(frame: np.ndarray, path: Path) -> Path:
+    from PIL import Image
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(frame).save(path)
+    return path
 
 
 def _build_fly_env(cfg: Config):

@@ -76,3 +76,19 @@ def test_maps_crop_refuses_an_existing_output(tmp_path):
     res = cli(*args, "--replace")
     assert res.exit_code == 0, res.output
     assert load_map(out).classes.shape == (20, 20)
+
+
+def test_simulate_refuses_a_frames_folder_that_holds_frames(tmp_path):
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    old = frames / "frame_0000000_t000000.0s.png"
+    old.write_bytes(OLD)
+    res = cli(*SIMULATE, "--frames", frames)
+    assert res.exit_code == 1 and "Traceback" not in res.output
+    (line,) = res.output.strip().splitlines()
+    assert str(frames) in line and "--replace" in line
+    assert old.read_bytes() == OLD and [p.name for p in frames.iterdir()] == [old.name]
+    res = cli(*SIMULATE, "--frames", frames, "--replace")
+    assert res.exit_code == 0, res.output
+    assert sorted(p.name[:13] for p in frames.iterdir()) == ["frame_0000000", "frame_0000001", "frame_0000002"]
+    assert old.read_bytes()[:4] == b"\x89PNG"  # overwritten by this run's frame
