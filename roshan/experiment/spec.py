@@ -119,8 +119,8 @@ class Run:
         """A hash of what decides the run: its config's values that differ from the defaults (so a config key added
         later with a default does not make every stored run look changed), controller, evaluation and buffer."""
         c = self.condition
-        body = [_non_defaults(to_dict(c.run_config(self.seed)), to_dict(Config())), c.controller, c.eval_episodes,
-                c.eval_seed, c.eval_envs, c.buffer and vars(c.buffer)]
+        body = [_non_defaults(to_dict(c.run_config(self.seed)), defaults_of_record()), c.controller,
+                c.eval_episodes, c.eval_seed, c.eval_envs, c.buffer and vars(c.buffer)]
         return hashlib.sha256(json.dumps(body, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
@@ -156,6 +156,20 @@ class Spec:
         """run key -> what decides that run (its resolved config, controller, evaluation, buffer): a stored run
         with another fingerprint is another run, and continuing it under this key is refused."""
         return {r.key: r.fingerprint() for r in self.runs()}
+
+
+# Defaults that changed after runs were recorded, with the value they had then: a fingerprint compares a run's
+# config with these, so a changed default neither makes a stored run look changed nor hides a real difference
+# (a run that set the new default's value explicitly before the change was already non-default then).
+DEFAULTS_OF_RECORD = {"planner": {"greedy_home": "original"}}
+
+
+def defaults_of_record() -> dict:
+    """Today's config defaults with :data:`DEFAULTS_OF_RECORD` over them."""
+    out = to_dict(Config())
+    for section, values in DEFAULTS_OF_RECORD.items():
+        out[section] = {**out[section], **values}
+    return out
 
 
 def _non_defaults(values: dict, defaults: dict) -> dict:

@@ -312,6 +312,23 @@ def test_waiting_runs_of_a_removed_condition_are_dropped_and_a_spec_that_has_the
     assert progress(study)["waiting"] == 6
 
 
+def test_the_readme_report_command_gives_the_committed_report(tmp_path):
+    """On a fresh clone `roshan experiment report configs/experiments/thesis.yaml --out out/thesis` (the README's
+    command) reads the committed journal and writes the committed report, table for table. The journal is read
+    from a copy here (the report never writes to it, but a running experiment may append to the checkout's)."""
+    journal = tmp_path / "experiment.journal"
+    journal.write_bytes((REPO / "benchmarks" / "results" / "thesis" / "experiment.journal").read_bytes())
+    out = subprocess.run([sys.executable, "-m", "roshan", "experiment", "report", "configs/experiments/thesis.yaml",
+                          "--storage", str(journal), "--out", str(tmp_path / "thesis")],
+                         capture_output=True, text=True, timeout=300, cwd=REPO)
+    assert out.returncode == 0, out.stderr[-3000:]
+    committed = REPO / "benchmarks" / "results" / "thesis"
+    for name in ("report.md", "per_seed.csv"):
+        assert (tmp_path / "thesis" / name).read_text() == (committed / name).read_text(), (
+            f"benchmarks/results/thesis/{name} is not what the committed journal gives: regenerate it with "
+            "`roshan experiment report configs/experiments/thesis.yaml --out benchmarks/results/thesis`")
+
+
 def test_a_spec_names_its_storage_and_the_report_finds_it_from_any_root(tmp_path):
     """The thesis spec names its committed journal, so the README's report command works on a fresh clone."""
     journal = tmp_path / "committed" / "experiment.journal"
@@ -572,3 +589,27 @@ def test_a_committed_cheap_row_is_reproduced_by_this_code(tmp_path):
     for key in ("success_rate", "failure_rates", "tte_episodes", "episodes", "last", "objective"):
         assert again[key] == committed[key], f"{key} differs from the committed row (made at {committed['code']})"
     assert again["train"]["updates"] == committed["train"]["updates"]
+
+
+def test_a_changed_default_leaves_stored_fingerprints_alone(tmp_path, monkeypatch):
+    """planner.greedy_home's default became `fixed` after the thesis rows ran with `original`: fingerprints
+    compare with the default of record, so those runs keep theirs, and a run that differs from it still differs."""
+    import dataclasses
+
+    import roshan.experiment.spec as spec_module
+    spec = load_spec(write_spec(tmp_path, SPEC.replace("    controller: greedy\n", "    controller: greedy\n"
+                                                       "    set: {{planner.greedy_home: original}}\n")))
+    plain = load_spec(write_spec(tmp_path))
+    fixed = load_spec(write_spec(tmp_path, SPEC.replace("    controller: greedy\n", "    controller: greedy\n"
+                                                        "    set: {{planner.greedy_home: fixed}}\n")))
+    before = [s.fingerprints()["greedy/seed_0"] for s in (spec, plain, fixed)]
+    assert before[0] == before[1] != before[2]
+    real = spec_module.Config
+    for default in ("original", "fixed"):  # whatever the code's default is now
+        config = lambda d=default: dataclasses.replace(real(), planner=dataclasses.replace(  # noqa: E731
+            real().planner, greedy_home=d))
+        monkeypatch.setattr(spec_module, "Config", config)
+        assert spec_module.to_dict(spec_module.Config())["planner"]["greedy_home"] == default
+        assert [s.fingerprints()["greedy/seed_0"] for s in (spec, fixed)] == [before[0], before[2]]
+    monkeypatch.setattr(spec_module, "DEFAULTS_OF_RECORD", {})  # without the record, the changed default shows
+    assert spec.fingerprints()["greedy/seed_0"] != before[0]
