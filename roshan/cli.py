@@ -242,7 +242,7 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
                    "else best_objective.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Folder for episodes.csv, summary.json, plots (default: RUN/eval/<seed>-<episodes>[-<hash of "
-                   "the other settings>]).")
+                   "the other settings>]; for a model shipped in models/, out/eval/<model>/...).")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
               help="Write {episodes, success_rate, failure_rates, tte, provenance} here.")
 @click.option("--replace", is_flag=True,
@@ -268,7 +268,8 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, replace, f
     run, --baseline greedy plays the heuristic controller on the same episodes (same seed and envs).
 
     Files go to a new folder per setting, RUN/eval/<seed>-<episodes>[-<hash>] (the hash covers --set, --baseline,
-    --checkpoint, --envs, --arch where they differ from the defaults); an output that already holds results is
+    --checkpoint, --envs, --arch where they differ from the defaults; a model shipped in models/ has its folders in
+    out/eval/<model>/ instead, so the checkout stays clean); an output that already holds results is
     refused unless --replace. Every summary JSON records the command, overrides, checkpoint and code version.
     """
     from roshan.runs import evaluate as ev
@@ -309,11 +310,12 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, replace, f
               type=click.Choice(["best", "best_eval", "best_objective", "best_reward", "latest"]), show_default=True)
 @click.option("--fps", type=click.FloatRange(min=0.1), default=10.0, show_default=True,
               help="Frames a second, at most.")
-@click.option("--gif", "gif_path", type=click.Path(dir_okay=False), default="watch.gif", show_default=True,
+@click.option("--gif", "gif_path", type=click.Path(dir_okay=False), default="out/watch.gif", show_default=True,
               help="Where the frames go when no window can be shown.")
 @click.option("--screenshot", type=click.Path(dir_okay=False), default=None,
-              help="With a window and --steps: save the window's last frame as this PNG.")
-@click.option("--replace", is_flag=True, help="Overwrite an existing --gif file (without it it is refused).")
+              help="Save the last frame as this PNG: the window's, or without a display the GIF's last frame.")
+@click.option("--replace", is_flag=True, help="Overwrite an existing --gif or --screenshot file (without it they are "
+              "refused).")
 @SETS
 @ARCH
 @THREADS
@@ -610,7 +612,9 @@ def bench_memory(steps, rss_envs, rss_steps, json_path, arch, threads):
     if rss_envs:
         report["rss"] = rss = b.big_map_rss(rss_envs, rss_steps, used, threads)
         click.echo(f"{rss_envs} envs of the 941k-cell map ({rss['layout']}), {rss_steps} updates: peak RSS "
-                   f"{rss['max_rss_bytes'] / 2**30:.2f} GiB, dropped blocks {rss['dropped_blocks']}")
+                   f"{rss['max_rss_bytes'] / 2**30:.2f} GiB ({rss['start_rss_bytes'] / 2**30:.2f} GiB before the "
+                   f"simulator, whose fields were estimated at {rss['estimate_bytes'] / 2**30:.2f} GiB), dropped "
+                   f"blocks {rss['dropped_blocks']}")
     if json_path:
         Path(json_path).write_text(json.dumps(report, indent=1))
 

@@ -244,6 +244,20 @@ def prepare_outputs(out_dir: Path, json_path: Path | None, frames_dir: Path | No
         prepare_output(gif_path, "the GIF", is_dir=False)
 
 
+# The models shipped with the checkout: their folders are tracked files, so evaluations of them go under out/
+# (gitignored) instead, and a checkout stays clean after the README's commands.
+SHIPPED_MODELS = Path(__file__).resolve().parents[2] / "models"
+
+
+def eval_root(run_dir: Path) -> Path:
+    """Where ``roshan eval RUN``'s folders go by default: ``RUN/eval``, or for a model shipped in the checkout's
+    ``models/`` ``out/eval/<model>`` (relative to the working directory)."""
+    run_dir = Path(run_dir)
+    if run_dir.resolve().parent == SHIPPED_MODELS.resolve():
+        return Path("out") / "eval" / run_dir.name
+    return run_dir / "eval"
+
+
 def evaluation_name(seed: int, episodes: int, settings: dict) -> str:
     """An evaluation's folder name: ``<seed>-<episodes>``, plus ``-<hash>`` of ``settings`` (whatever else
     changes the results: overrides, baseline, checkpoint, envs, arch) when there are any."""
@@ -319,7 +333,8 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
                  overrides: list[str] | tuple[str, ...] = (), baseline: str | None = None,
                  replace: bool = False) -> dict:
     """Evaluate a run folder or checkpoint with deterministic actions; files go to ``out_dir`` (default
-    ``<run>/eval/<seed>-<episodes>[-<hash of the other settings>]``, see :func:`evaluation_name`). An output
+    ``<run>/eval/<seed>-<episodes>[-<hash of the other settings>]``, see :func:`evaluation_name`; for a shipped
+    model ``out/eval/<model>/...``, :func:`eval_root`). An output
     that already holds results is refused unless ``replace``; every summary JSON records its provenance.
     ``overrides`` (``section.key=value``) change the evaluation setting, not the network.
     With ``baseline`` (random | greedy) the scripted policy runs on the same episodes (same seed: same fire
@@ -338,7 +353,7 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         settings = {"overrides": list(overrides), "baseline": baseline, "envs": E if E != default_envs else None,
                     "checkpoint": path.name if path != _default_checkpoint(run_dir) else None,
                     "arch": arch if arch != "cpu" else None}
-        out_dir = run_dir / "eval" / evaluation_name(seed, episodes, {k: v for k, v in settings.items() if v})
+        out_dir = eval_root(run_dir) / evaluation_name(seed, episodes, {k: v for k, v in settings.items() if v})
     out = Path(out_dir)
     if not replace:  # refused here, a command creates nothing, not even the folder or its lock
         _refuse_held(out, json_path, frames_dir, gif_path)

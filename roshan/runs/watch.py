@@ -27,9 +27,12 @@ def has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
+DEFAULT_GIF = Path("out") / "watch.gif"  # under out/ (gitignored): a checkout stays clean after the README's commands
+
+
 @torch.no_grad()
 def watch(target: str | Path, steps: int | None = None, seed: int = 0, which: str = "best", fps: float = 10.0,
-          gif_path: Path = Path("watch.gif"), screenshot: Path | None = None,
+          gif_path: Path = DEFAULT_GIF, screenshot: Path | None = None,
           overrides: list[str] | tuple[str, ...] = (), replace: bool = False) -> str:
     """Fly the run's policy in one env and show it; returns a line saying what was shown or written.
 
@@ -40,9 +43,12 @@ def watch(target: str | Path, steps: int | None = None, seed: int = 0, which: st
         seed: env seed (the fire layouts and wind of ``roshan eval --seed``).
         fps: at most this many frames a second in the window.
         gif_path: where env 0's frames go when no window can be shown.
-        screenshot: with a window, save its last frame (read back from GGUI) as this PNG.
-        replace: overwrite an existing ``gif_path``; without it the GIF is refused before anything runs.
+        screenshot: save the last frame as this PNG: the window's (read back from GGUI), or without a window the
+            GIF's last frame (the same picture, drawn by the raster renderer).
+        replace: overwrite an existing ``gif_path`` or ``screenshot``; without it they are refused before anything
+            runs.
     """
+    refuse_overwrite(screenshot, "the screenshot", replace)
     if not has_display():  # the GIF will be written: refuse an existing one before any work
         refuse_overwrite(gif_path, "the GIF", replace)
     ensure_taichi()
@@ -60,13 +66,21 @@ def watch(target: str | Path, steps: int | None = None, seed: int = 0, which: st
         if window is None:
             refuse_overwrite(gif_path, "the GIF", replace)  # a display without a window: before the episode
             prepare_output(gif_path, "the GIF", is_dir=False)
+            if screenshot is not None:
+                prepare_output(screenshot, "the screenshot", is_dir=False)
             frames = _fly(env, agent, obs, steps, first, stop_at_episode_end=True)
             with writing("the GIF", gif_path):
                 write_gif(frames, gif_path, fps=max(1, round(fps)))
-            return f"{why}: wrote {len(frames)} frames of env 0 to {gif_path} instead of showing a window"
+            said = f"{why}: wrote {len(frames)} frames of env 0 to {gif_path} instead of showing a window"
+            if screenshot is not None:  # the last frame, as the window would have shown it
+                _save_png(frames[-1], screenshot)
+                said += f"; screenshot (its last frame): {screenshot}"
+            return said
         if screenshot is not None:
             prepare_output(screenshot, "the screenshot", is_dir=False)
-        shown = _show_live(env, agent, obs, steps, first, window, fps, screenshot)
+        shown, last = _show_live(env, agent, obs, steps, first, window, fps, screenshot)
+        if screenshot is not None and steps is None:  # closed by hand: the last frame shown
+            _save_png(last, screenshot)
         return f"showed {shown} frames of {run_dir.name}" + (f"; screenshot: {screenshot}" if screenshot else "")
     finally:
         env.close()
@@ -105,7 +119,7 @@ def _fly(env, agent, obs, steps, first, stop_at_episode_end: bool) -> list[np.nd
     return frames
 
 
-def _show_live(env, agent, obs, steps, first, window, fps: float, screenshot: Path | None) -> int:
+def _show_live(env, agent, obs, steps, first, window, fps: float, screenshot: Path | None) -> tuple[int, np.ndarray]:
     act = policy_fn(agent)
     canvas = window.get_canvas()
     shown, done, last = 0, 0, first
@@ -123,7 +137,14 @@ def _show_live(env, agent, obs, steps, first, window, fps: float, screenshot: Pa
         shown += 1
         time.sleep(max(0.0, 1.0 / fps - (time.perf_counter() - t0)))
     window.destroy()
-    return shown
+    return shown, last
+
+
+def _save_png(frame: np.ndarray, path: Path) -> None:
+    from PIL import Image
+
+    with writing("the screenshot", path):
+        Image.fromarray(np.ascontiguousarray(frame)).save(path)
 
 
 def _save_window(window, path: Path) -> None:

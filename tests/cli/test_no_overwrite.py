@@ -1,6 +1,7 @@
-"""No command overwrites an existing output file without --replace: simulate --json / --gif, watch's GIF (its
-default watch.gif too), eval --save-buffer and maps crop -o refuse it with one line naming the file and --replace,
-before any work, so a refused command leaves every file as it was; with --replace they write it."""
+"""No command overwrites an existing output file without --replace: simulate --json / --gif / --frames, watch's
+GIF (its default out/watch.gif too) and --screenshot, eval --save-buffer and maps crop -o refuse it with one line
+naming the file and --replace, before any work, so a refused command leaves every file as it was; with --replace
+they write it."""
 
 from pathlib import Path
 
@@ -46,7 +47,8 @@ def test_simulate_refuses_an_existing_json_or_gif(tmp_path, existing):
 
 def test_watch_refuses_an_existing_default_gif(tmp_path, monkeypatch, no_display):
     monkeypatch.chdir(tmp_path)
-    gif = Path("watch.gif")
+    gif = Path("out/watch.gif")
+    gif.parent.mkdir()
     gif.write_bytes(OLD)
     refused(cli("watch", MODEL, "--steps", 1, "--set", "map.name=15x15_Woods"), gif)
     res = cli("watch", MODEL, "--steps", 1, "--set", "map.name=15x15_Woods", "--replace")
@@ -92,3 +94,10 @@ def test_simulate_refuses_a_frames_folder_that_holds_frames(tmp_path):
     assert res.exit_code == 0, res.output
     assert sorted(p.name[:13] for p in frames.iterdir()) == ["frame_0000000", "frame_0000001", "frame_0000002"]
     assert old.read_bytes()[:4] == b"\x89PNG"  # overwritten by this run's frame
+
+
+def test_watch_refuses_an_existing_screenshot(tmp_path, no_display):
+    shot = tmp_path / "shot.png"
+    shot.write_bytes(OLD)
+    refused(cli("watch", MODEL, "--steps", 1, "--gif", tmp_path / "w.gif", "--screenshot", shot), shot)
+    assert not (tmp_path / "w.gif").exists()  # refused before any work
