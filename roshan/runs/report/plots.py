@@ -81,10 +81,15 @@ def _plot_outcome_bar(ep: dict, path: Path, reasons: Sequence[str], who: str | N
     ax = fig.add_subplot()
     bars = ax.bar([LABELS[c] for c in cats], counts, color=[_COLORS[c] for c in cats])
     ax.bar_label(bars)
+    _integer_counts(ax)
+    return _finish(ax, path, _titled(f"episode outcomes (n = {outcome.size})", who), "episodes")
+
+
+def _integer_counts(ax) -> None:
+    """Whole-number ticks on the y axis of a plot that counts episodes (no 0.5 episode)."""
     from matplotlib.ticker import MaxNLocator
 
-    ax.yaxis.set_major_locator(MaxNLocator(integer=True))  # counts of episodes
-    return _finish(ax, path, _titled(f"episode outcomes (n = {outcome.size})", who), "episodes")
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
 
 
 def _plot_tte_hist(ep: dict, path: Path, reasons: Sequence[str], who: str | None) -> Path:
@@ -92,9 +97,29 @@ def _plot_tte_hist(ep: dict, path: Path, reasons: Sequence[str], who: str | None
     bins = np.histogram_bin_edges(ep["time"], bins=min(30, max(5, int(np.sqrt(ep["time"].size)))))
     fig = _new_figure()
     ax = fig.add_subplot()
-    ax.hist([ep["time"][is_success], ep["time"][~is_success]], bins=bins, stacked=True,
-            color=[_COLORS["success"], _COLORS["collision"]], label=["Success", "Failure"])
+    groups = [(ep["time"][m], c, f"{name} (n = {int(m.sum())})") for m, c, name in
+              ((is_success, _COLORS["success"], "Success"), (~is_success, _COLORS["collision"], "Failure"))
+              if m.any()]  # no legend entry for an outcome no episode had
+    ax.hist([g[0] for g in groups], bins=bins, stacked=True, color=[g[1] for g in groups], label=[g[2] for g in groups])
+    _integer_counts(ax)
     return _finish(ax, path, _titled("time to end", who), "episodes", xlabel=_TTE_LABEL, legend=True)
+
+
+def _mark_timeouts(ax, ep: dict, color: str = _COLORS["timeout"], name: str = "") -> None:
+    """Mark the episodes that timed out on an ECDF of times to end: they stop at the step limit, where the curve
+    would otherwise rise as if they had ended there. A dotted line at the limit (a shaded span where the limits of
+    the episodes differ), labelled with the count."""
+    if "reason" not in ep:
+        return
+    times = ep["time"][ep["reason"] == "timeout"]
+    if not times.size:
+        return
+    lo, hi = float(times.min()), float(times.max())
+    label = f"{name + ': ' if name else ''}{times.size} timeout{'s' * (times.size != 1)} at the step limit"
+    if lo == hi:
+        ax.axvline(lo, color=color, linestyle=":", linewidth=1.5, label=f"{label} ({lo:g})")
+    else:
+        ax.axvspan(lo, hi, color=color, alpha=0.2, linewidth=0, label=f"{label} ({lo:g}-{hi:g})")
 
 
 def _plot_tte_ecdf(ep: dict, path: Path, reasons: Sequence[str], who: str | None) -> Path:
@@ -105,6 +130,7 @@ def _plot_tte_ecdf(ep: dict, path: Path, reasons: Sequence[str], who: str | None
                               ("Failure", ~is_success, _COLORS["collision"])):
         if mask.any():
             ax.step(*_ecdf(ep["time"][mask]), where="post", color=color, label=f"{name} (n = {int(mask.sum())})")
+    _mark_timeouts(ax, ep)
     return _finish_ecdf(ax, path, who)
 
 
@@ -113,12 +139,15 @@ def _plot_reward_vs_episode(ep: dict, path: Path, reasons: Sequence[str], who: s
     x = ep.get("episode", np.arange(1, n + 1))
     is_success = ep["success"] == 1
     window = max(1, n // 10)
-    running = np.convolve(ep["reward"], np.ones(window) / window, mode="valid")
     fig = _new_figure()
     ax = fig.add_subplot()
-    ax.scatter(x[is_success], ep["reward"][is_success], s=12, color=_COLORS["success"], label="Success")
-    ax.scatter(x[~is_success], ep["reward"][~is_success], s=12, color=_COLORS["collision"], label="Failure")
-    ax.plot(x[window - 1:], running, color="black", label=f"running mean ({window})")
+    for mask, color, name in ((is_success, _COLORS["success"], "Success"), (~is_success, _COLORS["collision"],
+                                                                              "Failure")):
+        if mask.any():  # no legend entry for an outcome no episode had
+            ax.scatter(x[mask], ep["reward"][mask], s=12, color=color, label=name)
+    if window > 1:  # a running mean of 1 episode is the points themselves
+        running = np.convolve(ep["reward"], np.ones(window) / window, mode="valid")
+        ax.plot(x[window - 1:], running, color="black", label=f"running mean of {window} episodes")
     return _finish(ax, path, _titled("reward per episode", who), "episode return", xlabel="episode", legend=True)
 
 
@@ -154,9 +183,14 @@ def _plot_success_vs_time(ep: dict, path: Path, reasons: Sequence[str], who: str
     rate = np.divide(wins, counts, out=np.zeros_like(wins), where=counts > 0)
     fig = _new_figure()
     ax = fig.add_subplot()
-    ax.bar(edges[:-1], rate, width=np.diff(edges), align="edge", color=_COLORS["success"], edgecolor="white")
-    return _finish(ax, path, _titled("success against time to end", who), "success rate in bin",
-                   xlabel=_TTE_LABEL, ylim=(0, 1))
+    bars = ax.bar(edges[:-1], rate, width=np.diff(edges), align="edge", color=_COLORS["success"], edgecolor="white")
+    # each bin says how many episodes its rate stands for (an empty bin is "0", not a failed one)
+    ax.bar_label(bars, labels=[f"n={c}" for c in counts.astype(int)], fontsize=7, padding=2)
+    n, k = ep["success"].size, int(ep["success"].sum())
+    title = "success against time to end"
+    if k in (0, n):  # one outcome: the bars can only say 1 (or 0) everywhere; the title says so
+        title += f"\n{'every' if k else 'no'} episode succeeded ({k} of {n})"
+    return _finish(ax, path, _titled(title, who), "success rate in bin", xlabel=_TTE_LABEL, ylim=(0, 1.12))
 
 
 _EPISODE_PLOTS = {"failure_reasons_bar.png": _plot_outcome_bar, "time_to_end_hist.png": _plot_tte_hist,
@@ -229,8 +263,9 @@ def _plot_comparison_outcomes(eps: dict[str, dict], path: Path, reasons: Sequenc
 def _plot_comparison_ecdf(eps: dict[str, dict], path: Path) -> Path:
     fig = _new_figure()
     ax = fig.add_subplot()
-    for name, ep in eps.items():
-        ax.step(*_ecdf(ep["time"]), where="post", label=f"{name} (n = {ep['time'].size})")
+    for j, (name, ep) in enumerate(eps.items()):
+        ax.step(*_ecdf(ep["time"]), where="post", color=f"C{j}", label=f"{name} (n = {ep['time'].size})")
+        _mark_timeouts(ax, ep, color=f"C{j}", name=name)
     return _finish_ecdf(ax, path)
 
 
@@ -261,7 +296,9 @@ _PANELS = (
     ("Losses", "loss", None, ("Training/*loss*", "*/*loss*")),
     ("PPO diagnostics", "value", None, ("Training/Approx_KL", "Training/Clip_Fraction",
                                         "Sanitylogs/Explained_Variance")),
-    ("Learning rate and policy log std", "value", None, ("Training/LR", "Training/log_std")),
+    ("Learning rate", "learning rate", "from zero", ("Training/LR",)),
+    # Training/log_std holds the policy's std (exp of its log std), as the trainer logs it
+    ("Policy std (exp of log std)", "std of the action distribution", "from zero", ("Training/log_std",)),
     ("Speed", "env steps / s", None, ("Perf/*",)),
 )
 _DERIVED = ("_ci_low", "_ci_high", "_std", "_median", "_n")
@@ -293,8 +330,9 @@ def _group_tags(tags) -> list[tuple[str, str, tuple | None, list[str]]]:
     """The non-empty panels in order, then "Other" (tags no panel claims), each with its series (in the order of
     the panel's patterns: success before the failure rates)."""
     groups: dict[int | None, list[str]] = {}
+    named = {p for *_, patterns in _PANELS for p in patterns if "*" not in p}  # a series of its own, not derived
     for tag in tags:
-        if tag.endswith(_DERIVED) and not tag.endswith("_rate"):
+        if tag.endswith(_DERIVED) and not tag.endswith("_rate") and tag not in named:  # Training/log_std is kept
             continue
         groups.setdefault(_panel_of(tag), []).append(tag)
     for panel, members in groups.items():
@@ -309,7 +347,8 @@ def _series_label(tag: str) -> str:
     """``Evaluation/Reward_mean`` -> "eval: Reward", ``Episodes/success_rate`` -> "train: success_rate"."""
     group, _, name = tag.removesuffix("_mean").rpartition("/")
     special = {"Sanitylogs/Episode_Steps": "train: episode steps", "Evaluation/Percent_Burned_mean": "eval: burned out",
-               "Evaluation/Ever_Lit_mean": "eval: ever lit", "Evaluation/Time_mean": "eval: time to end"}
+               "Evaluation/Ever_Lit_mean": "eval: ever lit", "Evaluation/Time_mean": "eval: time to end",
+               "Training/LR": "learning rate", "Training/log_std": "policy std"}
     if tag in special:
         return special[tag]
     return {"Evaluation": f"eval: {name}", "Episodes": f"train: {name}"}.get(group, name or tag)
@@ -357,7 +396,10 @@ def plot_learning_curves(scalars: Mapping[str, Sequence[tuple[int, float]]], out
         ax.set_title(panel_title, fontsize=10)
         ax.set_xlabel(xlabel, fontsize=8)
         ax.set_ylabel(ylabel, fontsize=8)
-        if ylim is not None:
+        if ylim == "from zero":  # a decay from 1e-3 to 0.999998e-3 is flat, not a steep fall
+            top = max((max(v for _, v in scalars[t]) for t in tags if len(scalars[t])), default=1.0)
+            ax.set_ylim(0.0, 1.15 * top if top > 0 else 1.0)
+        elif ylim is not None:
             ax.set_ylim(*ylim)
         ax.xaxis.set_major_locator(MaxNLocator(nbins=4))
         ax.xaxis.set_major_formatter(EngFormatter(sep=""))
