@@ -49,6 +49,7 @@ __all__ = [
     "crop_map",
     "describe_map",
     "ignitable_fraction",
+    "initial_fire_count",
     "load_map",
     "read_geotiff",
     "uniform_map",
@@ -506,6 +507,12 @@ def ignitable_fraction(m: LandCoverMap) -> float:
     """Return the fraction of cells whose class can ignite (docs/model/fire.md §2.1, "ign?" column)."""
     ignitable = class_arrays()["is_ignitable"]
     return float(ignitable[m.classes].mean())
+
+
+def initial_fire_count(num_cells: int, fire_percentage: float) -> int:
+    """Fires the initial fire generator lights on a map of ``num_cells`` cells (docs/model/fire.md §11): the float32
+    product, truncated, as the reference computes it."""
+    return int(np.float32(num_cells) * np.float32(fire_percentage))
 
 
 def describe_map(m: LandCoverMap) -> str:

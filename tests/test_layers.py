@@ -1,6 +1,6 @@
 """Import layers of roshan: which modules may import which, read from the source with ``ast`` (nothing is imported).
 
-Layers, lowest first: base modules (config, maps, runtime, episode, checkpoints, io, allocator, ggui) import no
+Layers, lowest first: base modules (config, maps, runtime, episode, checkpoints, io, allocator, ggui, memory) import no
 other layer; ``kernels`` (Taichi) imports only base; ``algos`` (torch) imports only base; ``env`` imports base,
 kernels and, of the algos, only ``roshan.algos.frozen`` (the planner's frozen fly policy); ``runs``, ``study``,
 ``tools`` and ``cli`` sit on top. No two roshan modules may import each other, directly or round a longer
@@ -18,7 +18,7 @@ REPO = Path(__file__).resolve().parents[1]
 PACKAGE = "roshan"
 
 BASE = ("roshan.config", "roshan.maps", "roshan.runtime", "roshan.episode", "roshan.checkpoints", "roshan.io",
-        "roshan.allocator", "roshan.ggui")
+        "roshan.allocator", "roshan.ggui", "roshan.memory")
 UPPER = ("roshan.runs", "roshan.study", "roshan.experiment", "roshan.tools", "roshan.cli")
 # (modules under these prefixes, may not import these prefixes, except these modules)
 RULES = (

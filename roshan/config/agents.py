@@ -109,7 +109,8 @@ class PlannerConfig(Section):
                               doc="greedy heuristic: original = a drone whose fire is on the groundstation cell "
                                   "re-takes it every step and never drops (docs/model/agents.md §10.2); "
                                   "fixed = it drops")
-    max_candidates: int = num(0, 0, doc="candidate list length K (groundstation included); 0 = every cell + 1")
+    max_candidates: int = num(0, 0, 1 << 24,
+                              doc="candidate list length K (groundstation included); 0 = every cell + 1")
     temperature: float = num(1.0, 0.0, 10.0, lo_open=True,
                              doc="the planner's categorical is p^(1/T), renormalised (logits / T): T < 1 sharpens "
                                  "the sampled goals so training episodes can end in success; argmax is unchanged")

@@ -261,11 +261,15 @@ def _as_float(value: Any) -> float | None:
 
 
 def _as_int(value: Any) -> int | None:
-    """An int, a numpy int (Python callers) or a whole float like 4.0; else None (bools are not numbers here)."""
+    """An int, a numpy int (Python callers), a whole float like 4.0 or a string of one like "3e9" (YAML 1.1 reads
+    an exponent without a dot as a string); else None (bools are not numbers here)."""
     if isinstance(value, bool):
         return None
     if isinstance(value, int):
         return value
+    if isinstance(value, str):
+        number = _as_float(value)
+        return int(number) if number is not None and number.is_integer() else None
     if isinstance(value, numbers.Integral) or (isinstance(value, numbers.Real) and float(value).is_integer()):
         return int(value)
     return None

@@ -4,6 +4,13 @@ from dataclasses import dataclass, field
 
 from roshan.config.schema import Section, choice, num
 
+# Upper bounds of the pool sizes: a particle pool of 2^26 (1.3-2.1 GiB per env) serves a map of ~80 million cells
+# burning whole (the reference peaks at 0.4 convection and 0.8 radiation particles per cell), and 2^24 blocks hold
+# 2^30 cell records (32-bit indices). Larger values are typing mistakes; they used to end in a traceback or fill
+# the machine's memory.
+MAX_PARTICLES = 1 << 26
+MAX_BLOCKS = 1 << 24
+
 
 @dataclass(frozen=True)
 class ConvectionConfig(Section):
@@ -37,8 +44,8 @@ class FireConfig(Section):
     uniform_burning_time: float = num(120.0, 0.0, lo_open=True, doc="tau_burn on the uniform map (s)")
     convection: ConvectionConfig = field(default_factory=ConvectionConfig)
     radiation: RadiationConfig = field(default_factory=RadiationConfig)
-    conv_capacity: int = num(0, 0, doc="convection particles per env; 0 = auto from the map size")
-    rad_capacity: int = num(0, 0, doc="radiation particles per env; 0 = auto from the map size")
+    conv_capacity: int = num(0, 0, MAX_PARTICLES, doc="convection particles per env; 0 = auto from the map size")
+    rad_capacity: int = num(0, 0, MAX_PARTICLES, doc="radiation particles per env; 0 = auto from the map size")
     layout: str = choice("auto", ("auto", "dense", "sparse"),
                          doc="cell records: every cell (dense), or 8x8 blocks taken from a per-env pool when fire, "
                              "particles or water first touch them (sparse: far less memory on a big map, "
@@ -50,7 +57,8 @@ class FireConfig(Section):
                                "threads (chunks, for fewer envs than threads on a big map); the same trajectory "
                                "bit for bit. auto = chunks on the CPU where E < threads and an env lights >= 250,000 "
                                "fires (where it measured faster)")
-    block_capacity: int = num(0, 0, doc="8x8 blocks per env in the sparse layout; 0 = auto from the map size and "
+    block_capacity: int = num(0, 0, MAX_BLOCKS,
+                              doc="8x8 blocks per env in the sparse layout; 0 = auto from the map size and "
                                         "ignition.fire_percentage (a full pool is counted as dropped_blocks)")
 
 

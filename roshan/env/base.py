@@ -75,6 +75,20 @@ class VectorEnvCore(gym.vector.VectorEnv):
         back to the pool: the one place simulators are made (roshan.kernels.pool builds or reuses them)."""
         raise NotImplementedError
 
+    def level_name(self) -> str:
+        """The env as messages name it (``FlyVectorEnv (complex policy)``)."""
+        return type(self).__name__
+
+    def _buffer_bytes(self) -> int:
+        """Bytes of the torch buffers the level allocates next to its simulators (the memory estimate counts
+        them before anything is allocated)."""
+        raise NotImplementedError
+
+    def _core_buffer_bytes(self, obs_floats: int, reward_floats: int) -> int:
+        """Bytes :meth:`_allocate_buffers` takes for observations of ``obs_floats`` floats per env (twice: the
+        final copy) and rewards of ``reward_floats``."""
+        return self.num_envs * (8 * obs_floats + 4 * reward_floats + 2 + 4 * len(RECORD_FIELDS))
+
     def _allocate_buffers(self, obs_shape: tuple[int, ...], reward_shape: tuple[int, ...]) -> None:
         """The tensors the kernels write: observations (E, *obs_shape) and their final copy, rewards
         (E, *reward_shape), done flags, episode records; the views and info dict handed out."""

@@ -46,8 +46,16 @@ class FlyVectorEnv(VectorEnvCore):
         self._define_spaces(n, frames)
         self._allocate_buffers((n, frames, observe.frame_width(n)), (n,))
 
+    def level_name(self) -> str:
+        return f"FlyVectorEnv ({self.fly_config.policy} policy)"
+
     def _take_simulators(self, land, seed):
-        return take_fly_sims(land, self.config, self.fly_config, self.num_envs, seed, owner=self)
+        return take_fly_sims(land, self.config, self.fly_config, self.num_envs, seed, owner=self,
+                             extra_bytes=self._buffer_bytes(), who=self.level_name())
+
+    def _buffer_bytes(self) -> int:
+        n = self.num_drones
+        return self._core_buffer_bytes(n * self.fly_config.frames * observe.frame_width(n), n)
 
     def _define_spaces(self, n: int, frames: int) -> None:
         box = gym.spaces.Box

@@ -79,13 +79,25 @@ class PlannerVectorEnv(VectorEnvCore):
         self._explore_obs = fly_obs_views(self._explore_buf, m)
         self._explore_actions = torch.zeros((num_envs, m, 2), device=dev)
 
+    def level_name(self) -> str:
+        return f"PlannerVectorEnv ({self.controller})"
+
     def _take_simulators(self, land, seed):
         explore_frames = self.explorer_policy.frames if self.explorer_policy else 1
         sims, give_back = take_planner_sims(
             land, self.config, self.planner_config, self.num_envs, seed, controller=self.controller,
-            evaluation=self.evaluation, fly_frames=self.fly_policy.frames, explore_frames=explore_frames, owner=self)
+            evaluation=self.evaluation, fly_frames=self.fly_policy.frames, explore_frames=explore_frames, owner=self,
+            extra_bytes=self._buffer_bytes(), who=self.level_name())
         self.explorers, self.maps, self.max_candidates = sims.explorers, sims.maps, sims.max_candidates
         return sims, give_back
+
+    def _buffer_bytes(self) -> int:
+        n, pc = self.num_drones, self.planner_config
+        m, k = pc.num_explorers, pc.max_candidates or self.land.rows * self.land.cols + 1
+        ex_frames = self.explorer_policy.frames if self.explorer_policy else 1
+        width = max(end for _, end in obs_layout(n, k).values())
+        stacks = n * self.fly_policy.frames * observe.frame_width(n) + m * ex_frames * observe.frame_width(m)
+        return self._core_buffer_bytes(width, 1) + self.num_envs * 4 * (stacks + 2 * m)
 
     def _define_spaces(self, n: int) -> None:
         box, k = gym.spaces.Box, self.max_candidates

@@ -59,6 +59,7 @@ class DroneSim:
         self.capacity = cfg.water_capacity
         self.refill_rate = cfg.water_capacity * self.dt / (cfg.recharge_time + 1e-4)  # per step at the station
 
+        # field_bytes() counts these: keep it in step with them
         self.pos = ti.Vector.field(2, ti.f32, (E, N))
         self.vel = ti.Vector.field(2, ti.f32, (E, N))
         self.out_count = ti.field(ti.i32, (E, N))  # consecutive steps outside the grid
@@ -77,6 +78,15 @@ class DroneSim:
         self.water.fill(cfg.water_capacity)
         self._all = np.ones(E, dtype=np.int32)
         self._burning = tasks.BurningCells(fire)  # assign_fire_goals' candidates
+
+    @staticmethod
+    def field_bytes(num_envs: int, num_drones: int) -> int:
+        """Bytes of the fields (and host arrays) a DroneSim of ``num_envs`` x ``num_drones`` allocates, known before
+        it is built; the water tanks, full once built, once more for the pristine copy of the simulator pool."""
+        n = num_drones
+        per_drone = 8 + 8 + 4 + 4 + 8 + 4 + 4 + 4 + 4 + 4 + 4 + 4  # pos ... refilling
+        per_env = n * per_drone + n * n * (16 + 4) + 8 + 4  # + neighbours, their mask, groundstation, _all
+        return num_envs * (per_env + 4 * n)
 
     # ------------------------------------------------------------------------------------------ public API
 

@@ -49,6 +49,11 @@ class EpisodeKernels:
         self.steps = ti.field(ti.i32, E)  # physics steps so far (the TTE)
         self.ret = ti.field(ti.f32, E)
 
+    @staticmethod
+    def field_bytes(num_envs: int) -> int:
+        """Bytes of the episode fields of ``num_envs`` envs (ended, remaining, steps, ret)."""
+        return 16 * num_envs
+
     def reset_all(self, obs, final_obs, frames, explore_frames, seed_key: int) -> None:
         """Start a new episode in every env (``final_obs`` untouched)."""
         self.ended.fill(1)

@@ -91,6 +91,13 @@ def _stripe_paths(size: int, lines_size: int, n: int, vr: int, sweep_inc: bool, 
     return paths
 
 
+def meander_length(rows: int, cols: int, n: int, vr: int, version: str = "newest") -> int:
+    """The longest explorer path over the four groundstation corners (the waypoint table's length), from starts at
+    the corner cells' centres: what ExploreMaps's table holds, give or take the explorers' start offset."""
+    return max(len(p) for ci, cj in corner_cells(rows, cols)
+               for p in meander_paths(rows, cols, n, (ci + 0.5, cj + 0.5), vr, version=version))
+
+
 def corner_cells(rows: int, cols: int) -> list[tuple[int, int]]:
     """The four possible groundstation cells (docs/model/agents.md §4.1), indexed by corner id
     ``2 * (row != 1) + (col != 1)``."""
@@ -220,6 +227,14 @@ class ExploreMaps:
 
     def memory_bytes_per_env(self) -> int:
         return self.rows * self.cols + 4 * 5
+
+    @staticmethod
+    def field_bytes(num_envs: int, rows: int, cols: int, n_explorers: int, max_len: int) -> int:
+        """Bytes of the fields (and host arrays) ExploreMaps allocates, known before it is built: per env the fire
+        map and five counters (and ``_all``); shared, the waypoint table of ``max_len`` waypoints per path
+        (:func:`meander_length`) and the path lengths, twice (the simulator pool keeps a copy to restore them)."""
+        shared = NUM_CORNERS * n_explorers * (8 * max_len + 4) + 4 * NUM_CORNERS
+        return num_envs * (rows * cols + 4 * 5 + 4) + 2 * shared
 
     # ------------------------------------------------------------------------------------------ kernels
 

@@ -21,6 +21,7 @@ difference shows at the reference's checkpoints (e.g. a third of the forest burn
 
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import taichi as ti
@@ -30,7 +31,7 @@ from taichi.lang.field import ScalarField
 from roshan.config import FireConfig, IgnitionConfig, WindConfig
 from roshan.kernels import particles as pt
 from roshan.kernels import rng
-from roshan.kernels.fire_parallel import ChunkedStep
+from roshan.kernels.fire_parallel import ChunkedStep, scratch_bytes
 from roshan.kernels.fire_records import (
     BLOCK_CELLS,
     BLOCK_SHIFT,
@@ -73,7 +74,8 @@ from roshan.kernels.fire_records import (
     TIMER_FIELDS,
 )
 from roshan.kernels.ignition import PATTERNS, light_initial_fires
-from roshan.maps import BURNED, BURNING, CLASSES, FLOODED, GENERIC_UNBURNED, LandCoverMap
+from roshan.maps import BURNED, BURNING, CLASSES, FLOODED, GENERIC_UNBURNED, LandCoverMap, initial_fire_count
+from roshan.memory import check_fits
 from roshan.runtime import check_built_in_this_runtime, check_field_room, current_arch, ensure_taichi, taichi_generation
 
 
@@ -187,6 +189,103 @@ def env_loop_padding(num_envs: int) -> int:
     return max(1, -(-1024 * cpu_threads() // num_envs))
 
 
+# Bytes per env beyond the records, lists and pools (wind, episode, env key, generator counter), per class of the
+# class table (ignitable, n_conv, n_rad, tau_ign, tau_burn: 4 B; lr, sf: 8 B) and per entry of the random tables.
+ENV_SCALAR_BYTES = 8 + 4 + 4 + 4
+CLASS_BYTES = 5 * 4 + 2 * 8
+TABLE_BYTES = 4 + 8
+
+
+@dataclass(frozen=True)
+class FireSizes:
+    """The field sizes of a :class:`FireSim`, decided from the map, the env count and the config before anything
+    is allocated: FireSim allocates exactly these, and the memory estimate reads them (:func:`fire_sizes`)."""
+
+    rows: int
+    cols: int
+    num_envs: int
+    layout: str  # "dense" or "sparse"
+    num_blocks: int  # 8x8 blocks covering the map
+    block_capacity: int  # blocks per env in the sparse pool; 0 when dense
+    record_capacity: int  # cell records per env
+    list_capacity: int  # entries of each cell list per env
+    conv_capacity: int
+    rad_capacity: int
+    num_fires: int  # fires the generator lights at a reset
+
+    @property
+    def num_cells(self) -> int:
+        return self.rows * self.cols
+
+    @property
+    def sparse(self) -> bool:
+        return self.layout == "sparse"
+
+    def bytes_per_env(self) -> int:
+        """Field bytes one env holds: cell records, lists, block tables, particle pools and counters."""
+        tables = 4 * (self.num_blocks + self.block_capacity) if self.sparse else 0
+        return (self.record_capacity * RECORD_BYTES + LIST_BYTES * self.list_capacity + tables
+                + 4 * (pt.CONV_FIELDS * self.conv_capacity + pt.RAD_FIELDS * self.rad_capacity)
+                + 4 * (N_COUNTS + 8))
+
+    def shared_bytes(self) -> int:
+        """Field bytes the envs share: the map, the sparse layout's cell-to-block table, the class and random
+        tables."""
+        cells = 4 * self.num_cells * (2 if self.sparse else 1)
+        return cells + CLASS_BYTES * len(CLASSES) + TABLE_BYTES * rng.TABLE_SIZE
+
+    def estimate_bytes(self, chunked: bool = False) -> int:
+        """Every byte a FireSim of these sizes allocates: its fields, the chunked update's scratch (``chunked``)
+        and the host arrays of its counters."""
+        scratch = scratch_bytes(self.conv_capacity, self.rad_capacity, self.list_capacity) if chunked else 0
+        host = self.num_envs * 4 * (N_COUNTS + 1)
+        return (self.num_envs * (self.bytes_per_env() + ENV_SCALAR_BYTES) + self.shared_bytes() + scratch
+                + host)
+
+    def pristine_bytes(self) -> int:
+        """Bytes of the fields that hold other values than zero once built (map, block tables, episode numbers,
+        class and random tables): :mod:`roshan.kernels.pool` keeps a copy of those to restore a reused bundle."""
+        per_env = 4 + (4 * self.num_blocks if self.sparse else 0)
+        return self.num_envs * per_env + self.shared_bytes()
+
+    def ways_out(self) -> list[str]:
+        """The settings that make these fields smaller, as a memory refusal suggests them."""
+        ways = ["fewer envs (--envs / sim.envs)"]
+        if self.sparse:
+            ways.append(f"a smaller fire.block_capacity (now {self.block_capacity:,} blocks per env)")
+        else:
+            ways.append("the sparse layout (fire.layout=sparse: 8x8 blocks only where the fire goes)")
+        ways.append(f"smaller fire.conv_capacity / fire.rad_capacity (now {self.conv_capacity:,} / "
+                    f"{self.rad_capacity:,} particles per env)")
+        return ways
+
+    def describe(self, name: str) -> str:
+        """``N env(s) of map 'name' (R x C cells, layout)`` for messages."""
+        return (f"{self.num_envs:,} env{'s' * (self.num_envs != 1)} of map {name!r} ({self.rows:,} x {self.cols:,} "
+                f"cells, {self.layout} layout)")
+
+
+def fire_sizes(rows: int, cols: int, fire: FireConfig, ignition: IgnitionConfig, num_envs: int) -> FireSizes:
+    """Layout, record and list capacities and particle pool sizes of ``num_envs`` envs of a rows x cols map (see
+    the module docstring, :func:`choose_layout` and :func:`default_capacities`)."""
+    num_cells = rows * cols
+    block_rows, block_cols = block_grid(rows, cols)
+    num_blocks = block_rows * block_cols
+    num_fires = initial_fire_count(num_cells, ignition.fire_percentage)
+    block_capacity = min(num_blocks, fire.block_capacity or default_block_capacity(num_blocks, num_fires))
+    layout = choose_layout(fire.layout, num_cells, block_capacity, num_envs)
+    if layout == "sparse":
+        record_capacity = block_capacity * BLOCK_CELLS
+        list_capacity = min(num_cells, record_capacity)  # a listed cell has a record
+        auto_conv, auto_rad = default_capacities(num_cells, list_capacity, num_fires)
+    else:
+        block_capacity = 0
+        record_capacity = list_capacity = num_cells
+        auto_conv, auto_rad = default_capacities(num_cells)
+    return FireSizes(rows, cols, num_envs, layout, num_blocks, block_capacity, record_capacity, list_capacity,
+                     fire.conv_capacity or auto_conv, fire.rad_capacity or auto_rad, num_fires)
+
+
 @ti.data_oriented
 class FireSim:
     """E FireSPIN environments on the same map, each with its own fire, wind and random stream.
@@ -196,10 +295,13 @@ class FireSim:
         fire, wind, ignition: model sections (``roshan.config``).
         num_envs: E.
         seed: seed of all random streams; env ``e`` of episode ``k`` draws from hash(seed, e, k, ...).
+        check_memory: refuse (:class:`roshan.memory.MemoryLimitError`) before allocating what would not fit in the
+            memory available; False where the caller has checked a larger build that holds this one
+            (:mod:`roshan.kernels.pool`).
     """
 
     def __init__(self, land: LandCoverMap, fire: FireConfig | None = None, wind: WindConfig | None = None,
-                 ignition: IgnitionConfig | None = None, num_envs: int = 1, seed: int = 0):
+                 ignition: IgnitionConfig | None = None, num_envs: int = 1, seed: int = 0, check_memory: bool = True):
         ensure_taichi()
         check_field_room("FireSim")
         self._taichi_generation = taichi_generation()  # reset/step refuse to run on a reset runtime
@@ -214,7 +316,7 @@ class FireSim:
         self.rows, self.cols = land.shape
         self.num_cells = self.rows * self.cols
         self.cell_size = float(land.cell_size)
-        self._choose_layout(fire, ignition)
+        self._choose_layout(fire, ignition, check_memory)
         self._bake_constants()
         self.env_pad = env_loop_padding(num_envs)
 
@@ -250,30 +352,23 @@ class FireSim:
                           q, np.stack([np.cos(angles), np.sin(angles)], axis=1).astype(np.float32))
         self._all = np.ones(E, dtype=np.int32)
         self._counts_host = np.zeros((E, N_COUNTS), dtype=np.int32)  # what step() and counters() read into
-        self.parallel = choose_parallel(fire.parallel, num_envs, self.num_fires)
         self.chunked = ChunkedStep(self) if self.parallel == "chunks" else None
 
     # ------------------------------------------------------------------------------------------ setup
 
-    def _choose_layout(self, fire: FireConfig, ignition: IgnitionConfig) -> None:
-        """Layout, record and list capacities, and particle pool sizes (see the module docstring)."""
+    def _choose_layout(self, fire: FireConfig, ignition: IgnitionConfig, check_memory: bool) -> None:
+        """Layout, record and list capacities, and particle pool sizes (see the module docstring); refuses, before
+        anything is allocated, a simulator that would not fit in the memory available (``check_memory``)."""
+        self.sizes = z = fire_sizes(self.rows, self.cols, fire, ignition, self.num_envs)
         self.block_rows, self.block_cols = block_grid(self.rows, self.cols)
-        self.num_blocks = self.block_rows * self.block_cols
-        num_fires = int(np.float32(self.num_cells) * np.float32(ignition.fire_percentage))  # as the generator's
-        auto_blocks = default_block_capacity(self.num_blocks, num_fires)
-        self.block_capacity = min(self.num_blocks, fire.block_capacity or auto_blocks)
-        self.layout = choose_layout(fire.layout, self.num_cells, self.block_capacity, self.num_envs)
-        self.sparse = self.layout == "sparse"
-        if self.sparse:
-            self.record_capacity = self.block_capacity * BLOCK_CELLS
-            self.list_capacity = min(self.num_cells, self.record_capacity)  # a listed cell has a record
-            auto_conv, auto_rad = default_capacities(self.num_cells, self.list_capacity, num_fires)
-        else:
-            self.block_capacity = 0
-            self.record_capacity = self.list_capacity = self.num_cells
-            auto_conv, auto_rad = default_capacities(self.num_cells)
-        self.conv_capacity = fire.conv_capacity or auto_conv
-        self.rad_capacity = fire.rad_capacity or auto_rad
+        self.num_blocks, self.block_capacity, self.layout = z.num_blocks, z.block_capacity, z.layout
+        self.sparse = z.sparse
+        self.record_capacity, self.list_capacity = z.record_capacity, z.list_capacity
+        self.conv_capacity, self.rad_capacity = z.conv_capacity, z.rad_capacity
+        self.parallel = choose_parallel(fire.parallel, self.num_envs, z.num_fires)
+        if check_memory:
+            check_fits(f"FireSim: {z.describe(self.land_map.name)}", z.estimate_bytes(self.parallel == "chunks"),
+                       z.ways_out(), current_arch())
 
     def _alloc_block_pool(self, land: LandCoverMap) -> None:
         """The sparse layout's tables: each cell's block and place in it, and each env's block slots."""
@@ -307,7 +402,7 @@ class FireSim:
         self.wind_speed = w.speed
         self.wind_dir = w.direction  # degrees, -1 = random per episode
         self.spread_prob, self.spread_noise = ig.spread_prob, ig.noise
-        self.num_fires = int(np.float32(self.num_cells) * np.float32(ig.fire_percentage))  # float product, truncated
+        self.num_fires = self.sizes.num_fires
         self.num_clusters = ig.clusters
         self.pattern = PATTERNS.index(ig.pattern)
         self.reseed = ig.reseed
@@ -450,10 +545,7 @@ class FireSim:
     def memory_bytes_per_env(self) -> int:
         """Bytes of Taichi field memory one env holds (cell records, lists, block tables, particle pools); the
         chunked update adds one env's worth of scratch per simulator (``chunked.memory_bytes()``)."""
-        tables = 4 * (self.num_blocks + self.block_capacity) if self.sparse else 0
-        return (self.record_capacity * RECORD_BYTES + LIST_BYTES * self.list_capacity + tables
-                + 4 * (pt.CONV_FIELDS * self.conv_capacity + pt.RAD_FIELDS * self.rad_capacity)
-                + 4 * (N_COUNTS + 8))
+        return self.sizes.bytes_per_env()
 
     # Test hooks: drive the cell state machine directly, without particles or the generator.
     def ignite_cells(self, mask) -> None:

@@ -59,6 +59,14 @@ K_KEPT, K_QUEUED, K_LIT, K_CONV, K_RAD, K_BURNED = 0, 1, 2, 2, 3, 4
 F_OUT, F_CONV, F_RAD = range(3)
 
 
+def scratch_bytes(conv_capacity: int, rad_capacity: int, list_capacity: int) -> int:
+    """The scratch fields' bytes of a :class:`ChunkedStep` for these pool and list sizes (known before it is
+    built: the memory estimate of :func:`roshan.kernels.fire.fire_sizes` counts them)."""
+    big = (pt.CONV_FIELDS * conv_capacity + pt.RAD_FIELDS * rad_capacity
+           + max(conv_capacity + rad_capacity, list_capacity) + 2 * list_capacity)
+    return 4 * (big + 4 * 3 + 4 * MAX_CHUNKS * (5 + 3) + 2)
+
+
 @ti.data_oriented
 class ChunkedStep:
     """The chunked update for a :class:`FireSim` (which builds it when ``fire.parallel`` picks ``chunks``)."""
@@ -81,8 +89,7 @@ class ChunkedStep:
     def memory_bytes(self) -> int:
         """Scratch bytes (one env's worth, whatever the number of envs)."""
         s = self.sim
-        return 4 * (pt.CONV_FIELDS * s.conv_capacity + pt.RAD_FIELDS * s.rad_capacity
-                    + max(s.conv_capacity + s.rad_capacity, s.list_capacity) + 2 * s.list_capacity)
+        return scratch_bytes(s.conv_capacity, s.rad_capacity, s.list_capacity)
 
     def advance(self, n_steps: int) -> None:
         for _ in range(n_steps):

@@ -118,6 +118,12 @@ class PlannerKernels(EpisodeKernels):
         self.cand_cell = ti.field(ti.i32, (E, max_candidates))  # flat cell of candidate k (k >= 1)
         self.cand_count = ti.field(ti.i32, E)  # valid candidates, groundstation included
 
+    @staticmethod
+    def field_bytes(num_envs: int, num_drones: int, max_candidates: int) -> int:
+        """Bytes of the fields PlannerKernels allocates (the episode fields included), known before it is built."""
+        per_env = 8 * 4 + 4 * num_drones + 4 * max_candidates  # scalars, prev_water, cand_cell
+        return EpisodeKernels.field_bytes(num_envs) + num_envs * per_env
+
     # ------------------------------------------------------------------------------------------ kernels
 
     @ti.kernel

@@ -24,14 +24,16 @@ import taichi as ti
 
 from roshan.config import CONTROLLERS, Config, FlyConfig, PlannerConfig
 from roshan.kernels.drones import DroneSim
-from roshan.kernels.explore import ExploreMaps
-from roshan.kernels.fire import FireSim
+from roshan.kernels.episode import EpisodeKernels
+from roshan.kernels.explore import ExploreMaps, meander_length
+from roshan.kernels.fire import FireSim, FireSizes, choose_parallel, fire_sizes
 from roshan.kernels.fly import FlyKernels, time_limit
 from roshan.kernels.planner import PlannerKernels, planner_time_limit
 from roshan.kernels.render import EnvZeroFrames
 from roshan.kernels.rewards import PlannerCoefficients
 from roshan.maps import LandCoverMap
-from roshan.runtime import ensure_taichi, on_taichi_reset
+from roshan.memory import check_fits, format_bytes
+from roshan.runtime import current_arch, ensure_taichi, on_taichi_reset
 
 # ---------------------------------------------------------------------------------------------- bundles
 
@@ -61,37 +63,78 @@ class PlannerSims:
     max_candidates: int
 
 
+@dataclass(frozen=True)
+class Estimate:
+    """What a bundle would allocate, worked out before anything is: its bytes (fields, host arrays and the pool's
+    pristine copies), the fire's sizes, and the settings that make it smaller beyond the fire's."""
+
+    bytes: int
+    fire: FireSizes
+    ways_out: tuple[str, ...] = ()
+
+
+def fire_estimate(land: LandCoverMap, cfg: Config, num_envs: int) -> tuple[int, FireSizes]:
+    """Bytes of a bundle's FireSim (its pristine copy included) and its sizes."""
+    z = fire_sizes(land.rows, land.cols, cfg.fire, cfg.ignition, num_envs)
+    chunked = choose_parallel(cfg.fire.parallel, num_envs, z.num_fires) == "chunks"
+    return z.estimate_bytes(chunked) + z.pristine_bytes(), z
+
+
+def fly_estimate(land: LandCoverMap, cfg: Config, num_envs: int) -> Estimate:
+    """What :func:`take_fly_sims` would allocate for ``num_envs`` envs (the renderer, made at the first frame,
+    aside)."""
+    fire_bytes, z = fire_estimate(land, cfg, num_envs)
+    drones = DroneSim.field_bytes(num_envs, cfg.drones.num_drones)
+    return Estimate(fire_bytes + drones + EpisodeKernels.field_bytes(num_envs), z)
+
+
+def planner_estimate(land: LandCoverMap, cfg: Config, pc: PlannerConfig, num_envs: int) -> Estimate:
+    """What :func:`take_planner_sims` would allocate for ``num_envs`` envs (the renderer aside)."""
+    fire_bytes, z = fire_estimate(land, cfg, num_envs)
+    k = pc.max_candidates or land.rows * land.cols + 1
+    max_len = meander_length(land.rows, land.cols, pc.num_explorers, pc.explorer_view_range, pc.meander)
+    total = (fire_bytes + DroneSim.field_bytes(num_envs, cfg.drones.num_drones)
+             + DroneSim.field_bytes(num_envs, pc.num_explorers)
+             + ExploreMaps.field_bytes(num_envs, land.rows, land.cols, pc.num_explorers, max_len)
+             + PlannerKernels.field_bytes(num_envs, cfg.drones.num_drones, k))
+    return Estimate(total, z, (f"a smaller planner.max_candidates (now {k:,} per env)",))
+
+
 def take_fly_sims(land: LandCoverMap, cfg: Config, fly: FlyConfig, num_envs: int, seed: int,
-                  owner: object) -> tuple[FlySims, Callable[[], None]]:
+                  owner: object, extra_bytes: int = 0,
+                  who: str = "FlyVectorEnv") -> tuple[FlySims, Callable[[], None]]:
     """FlyAgent simulators for ``owner`` (an env), pooled or new, and the call that gives them back.
 
     The give-back call is idempotent and also runs when ``owner`` is garbage collected, so an env that is
-    dropped without ``close()`` still returns its simulators.
+    dropped without ``close()`` still returns its simulators. A new bundle is first estimated, with the
+    ``extra_bytes`` the caller will allocate next to it, and refused (MemoryLimitError, naming ``who``) where
+    that would not fit in the memory available.
     """
     key = ("fly", land_key(land), cfg.fire, cfg.wind, cfg.ignition, cfg.drones, fly, num_envs)
 
     def build() -> FlySims:
-        fire = FireSim(land, cfg.fire, cfg.wind, cfg.ignition, num_envs=num_envs, seed=seed)
+        fire = FireSim(land, cfg.fire, cfg.wind, cfg.ignition, num_envs=num_envs, seed=seed, check_memory=False)
         drones = DroneSim(fire, cfg.drones)
         t_max = time_limit(land.rows, land.cols, land.cell_size, cfg.fire.dt, cfg.drones.max_speed,
                            cfg.ignition.fire_percentage, fly)
         return FlySims(fire, drones, FlyKernels(fire, drones, fly, t_max), EnvZeroFrames(drones), t_max)
 
-    return _take(key, build, land, seed, owner)
+    return _take(key, build, lambda: fly_estimate(land, cfg, num_envs), extra_bytes, who, land, seed, owner)
 
 
 def take_planner_sims(land: LandCoverMap, cfg: Config, pc: PlannerConfig, num_envs: int, seed: int, *,
                       controller: str, evaluation: bool, fly_frames: int, explore_frames: int,
-                      owner: object) -> tuple[PlannerSims, Callable[[], None]]:
+                      owner: object, extra_bytes: int = 0,
+                      who: str = "PlannerVectorEnv") -> tuple[PlannerSims, Callable[[], None]]:
     """PlannerAgent simulators (planner drones, explorers, fire map, planner kernels), pooled or new, and the
-    call that gives them back (see :func:`take_fly_sims`)."""
+    call that gives them back (see :func:`take_fly_sims`, also for the memory check)."""
     if controller not in CONTROLLERS:
         raise ValueError(f"controller must be one of {', '.join(CONTROLLERS)}, got {controller!r}")
     key = ("planner", land_key(land), cfg.fire, cfg.wind, cfg.ignition, cfg.drones, pc, num_envs, controller,
            evaluation, fly_frames, explore_frames)
 
     def build() -> PlannerSims:
-        fire = FireSim(land, cfg.fire, cfg.wind, cfg.ignition, num_envs=num_envs, seed=seed)
+        fire = FireSim(land, cfg.fire, cfg.wind, cfg.ignition, num_envs=num_envs, seed=seed, check_memory=False)
         drones = DroneSim(fire, cfg.drones)
         explorer_cfg = replace(cfg.drones, num_drones=pc.num_explorers, max_speed=pc.explorer_speed,
                                view_range=pc.explorer_view_range)
@@ -112,7 +155,7 @@ def take_planner_sims(land: LandCoverMap, cfg: Config, pc: PlannerConfig, num_en
         viewer = EnvZeroFrames(drones, explorers, maps.fire_map)
         return PlannerSims(fire, drones, explorers, maps, kernels, viewer, t_max, max_candidates)
 
-    return _take(key, build, land, seed, owner)
+    return _take(key, build, lambda: planner_estimate(land, cfg, pc, num_envs), extra_bytes, who, land, seed, owner)
 
 
 def land_key(land: LandCoverMap) -> tuple:
@@ -163,14 +206,21 @@ _free: dict[tuple, list[_Entry]] = {}
 _generation = [0]
 
 
-def _take(key: tuple, build: Callable[[], FlySims | PlannerSims], land: LandCoverMap, seed: int,
+def _take(key: tuple, build: Callable[[], FlySims | PlannerSims], estimate: Callable[[], Estimate],
+          extra_bytes: int, who: str, land: LandCoverMap, seed: int,
           owner: object) -> tuple[FlySims | PlannerSims, Callable[[], None]]:
     ensure_taichi()
     free = _free.get(key)
     if free:
+        check_fits(who, extra_bytes, ["fewer envs (--envs / sim.envs)"], current_arch())
         entry = free.pop()
         entry.pristine.restore()
     else:
+        est = estimate()
+        need = est.bytes + extra_bytes
+        z = est.fire
+        check_fits(f"{who}: {z.describe(land.name)}, about {format_bytes(need / z.num_envs)} per env,", need,
+                   [*z.ways_out(), *est.ways_out], current_arch())
         sims = build()
         entry = _Entry(sims, Pristine(_simulators(sims)))
     entry.sims.fire.seed = int(seed)

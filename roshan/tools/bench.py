@@ -26,8 +26,8 @@ from roshan.config import (
 from roshan.env.fly import FlyVectorEnv
 from roshan.kernels.fire import FireSim
 from roshan.maps import LandCoverMap, load_map
-from roshan.runs.collect import PPOLearner
 from roshan.runs.envs import make_env
+from roshan.runs.learners import PPOLearner
 from roshan.runtime import init_taichi
 
 REFERENCE_QUANTITIES = ("burning", "burned", "convection", "radiation")
@@ -290,12 +290,15 @@ def _peak_rss_bytes() -> int:
 
 def _rss_child(queue, envs: int, steps: int, arch: str, threads: int | None) -> None:
     init_taichi(arch, threads)
-    sim = FireSim(tiled_map(), ignition=IgnitionConfig(fire_percentage=0.015, clusters=2), num_envs=envs)
+    land = tiled_map()
+    start = _peak_rss_bytes()  # Taichi's runtime and the map: what the memory estimate finds resident already
+    sim = FireSim(land, ignition=IgnitionConfig(fire_percentage=0.015, clusters=2), num_envs=envs)
     sim.reset()
     sim.step(steps)
     stats = sim.stats()
     queue.put({"envs": envs, "steps": steps, "layout": sim.layout,
-               "max_rss_bytes": _peak_rss_bytes(),
+               "max_rss_bytes": _peak_rss_bytes(), "start_rss_bytes": start,
+               "estimate_bytes": sim.sizes.estimate_bytes(sim.chunked is not None),
                "dropped_blocks": int(stats["dropped_blocks"].sum())})
 
 
