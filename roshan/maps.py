@@ -44,6 +44,7 @@ __all__ = [
     "MapError",
     "bundled_map_path",
     "bundled_maps",
+    "check_drone_map",
     "class_arrays",
     "class_histogram",
     "crop_map",
@@ -513,6 +514,41 @@ def initial_fire_count(num_cells: int, fire_percentage: float) -> int:
     """Fires the initial fire generator lights on a map of ``num_cells`` cells (docs/model/fire.md §11): the float32
     product, truncated, as the reference computes it."""
     return int(np.float32(num_cells) * np.float32(fire_percentage))
+
+
+# The groundstation sits one cell inside a map corner (docs/model/agents.md §4.1): rows 1 and rows - 2 must be cells.
+MIN_DRONE_MAP_SIDE = 3
+
+
+def check_drone_map(m: LandCoverMap, fire_percentage: float, fights_fire: bool, who: str) -> None:
+    """Refuse a map on which ``who`` (an env's description) cannot run a meaningful episode, with a MapError naming
+    the map and why: smaller than 3 x 3 cells (no cell for the groundstation), and where the drones' objective is
+    to put fires out (``fights_fire``), no cell that can burn, or too few cells for ``fire_percentage`` to light
+    any fire. Without the refusal such episodes ended at once with nothing lit and counted as successes.
+
+    ``fire_percentage == 0`` is allowed: a scene whose fires are lit by hand (``FireSim.ignite_cells``).
+    """
+    where = f"map {m.name!r} ({m.rows} x {m.cols} cells)"
+    if m.rows < MIN_DRONE_MAP_SIDE or m.cols < MIN_DRONE_MAP_SIDE:
+        raise MapError(f"{where} is too small for {who}: the groundstation sits one cell inside a corner, so a map "
+                       f"needs at least {MIN_DRONE_MAP_SIDE} x {MIN_DRONE_MAP_SIDE} cells")
+    if not fights_fire:
+        return
+    if ignitable_fraction(m) == 0.0:
+        classes = ", ".join(f"{CLASSES[c].name} ({n})" for c, n in class_histogram(m).items())
+        raise MapError(f"{where} has no cell that can burn (its cells: {classes}): {who} would have no fire to put "
+                       "out; use a map with burnable land")
+    cells = m.rows * m.cols
+    if fire_percentage > 0 and initial_fire_count(cells, fire_percentage) == 0:
+        need = math.ceil(1.0 / fire_percentage)
+        while initial_fire_count(need, fire_percentage) == 0:
+            need += 1
+        least = math.ceil(1e4 / cells) / 1e4  # rounded up to 4 decimals: it must light one fire as written
+        while initial_fire_count(cells, least) == 0:
+            least += 1e-4
+        raise MapError(f"{where} is too small for ignition.fire_percentage = {fire_percentage:g}: {cells} cells x "
+                       f"{fire_percentage:g} lights no fire, so {who} would have nothing to put out; use a map of "
+                       f"at least {need} cells or ignition.fire_percentage >= {least:.4g}")
 
 
 def describe_map(m: LandCoverMap) -> str:

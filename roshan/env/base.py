@@ -10,6 +10,7 @@ Callers tell the levels apart by what they need to know, not by type: :attr:`Vec
 how actions are shaped, :attr:`VectorEnvCore.failure_reasons` which failures the records can hold.
 """
 
+import warnings
 from collections.abc import Callable
 
 import gymnasium as gym
@@ -20,7 +21,7 @@ from gymnasium.vector import AutoresetMode
 from roshan.config import Config
 from roshan.episode import EPISODE_FIELDS, FIRE_FIELDS, RECORD_FIELDS
 from roshan.kernels.pool import FlySims, PlannerSims
-from roshan.maps import LandCoverMap, load_map
+from roshan.maps import LandCoverMap, check_drone_map, load_map
 from roshan.runtime import check_built_in_this_runtime, ensure_taichi, taichi_generation, torch_device
 
 CLOSED = -1  # the runtime generation of a closed env: never Taichi's, so step's one comparison catches it
@@ -46,6 +47,9 @@ class VectorEnvCore(gym.vector.VectorEnv):
     failure_reasons = ("collision", "boundary", "timeout")  # the failures an episode record can hold
     default_caption_name = "FlyAgent"  # who flies, in the caption of rendered frames (caption_name)
     has_reward = True  # False where the controller earns no reward (the greedy heuristic): reports leave it out
+    # True where the drones' objective is putting fires out (complex FlyAgent, planner, heuristic): such an env
+    # refuses a map where no fire can start, and its episodes succeed only once a fire was lit and put out.
+    fights_fire = True
 
     def __init__(self, num_envs: int, config: Config | None, seed: int | None, render_mode: str | None):
         ensure_taichi()
@@ -58,6 +62,7 @@ class VectorEnvCore(gym.vector.VectorEnv):
         self.device = torch.device(torch_device())
         self.land = load_map(cfg.map.name, band=cfg.map.band or None, rows=cfg.map.uniform_rows,
                              cols=cfg.map.uniform_cols)
+        self._check_map()
         # The simulators of an earlier, closed env of the same build when there is one: no new fields, no compiling.
         sims, self._give_back_sims = self._take_simulators(self.land, cfg.sim.seed if seed is None else seed)
         self.fire, self.drones, self.kernels, self._viewer = sims.fire, sims.drones, sims.kernels, sims.viewer
@@ -78,6 +83,16 @@ class VectorEnvCore(gym.vector.VectorEnv):
     def level_name(self) -> str:
         """The env as messages name it (``FlyVectorEnv (complex policy)``)."""
         return type(self).__name__
+
+    def _check_map(self) -> None:
+        """Refuse a map too small for drones, or one where no fire can start when fires are the objective
+        (MapError); warn where no fire is lit at a reset on purpose (``ignition.fire_percentage = 0``)."""
+        pct = self.config.ignition.fire_percentage
+        check_drone_map(self.land, pct, self.fights_fire, self.level_name())
+        if self.fights_fire and pct == 0:
+            warnings.warn(f"{self.level_name()}: ignition.fire_percentage = 0 lights no fire at a reset; an episode "
+                          "whose fires are not lit by hand (FireSim.ignite_cells) runs until its time limit and "
+                          "never counts as a success", stacklevel=4)
 
     def _buffer_bytes(self) -> int:
         """Bytes of the torch buffers the level allocates next to its simulators (the memory estimate counts

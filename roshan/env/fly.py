@@ -46,6 +46,11 @@ class FlyVectorEnv(VectorEnvCore):
         self._define_spaces(n, frames)
         self._allocate_buffers((n, frames, observe.frame_width(n)), (n,))
 
+    @property
+    def fights_fire(self) -> bool:
+        """The complex policy puts fires out; the simple one flies to goals (a fire or a corner)."""
+        return self.fly_config.policy == "complex"
+
     def level_name(self) -> str:
         return f"FlyVectorEnv ({self.fly_config.policy} policy)"
 

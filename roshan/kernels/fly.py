@@ -161,10 +161,11 @@ class FlyKernels(EpisodeKernels):
 
     @ti.func
     def has_succeeded(self, e, d) -> ti.i32:
-        """Simple: reached the goal. Complex: put out the last fire, or nothing burns and no particle lives."""
+        """Simple: reached the goal. Complex: put out the last fire, or nothing burns and no particle lives once a
+        fire was lit (an episode without any fire, fire_percentage = 0 and none lit by hand, never succeeds)."""
         success = self.drones.objective[e, d]
         if ti.static(self.is_complex):
-            if self.fire.burning_count(e) == 0 and self.fire.particle_count(e) == 0:
+            if self.fire.burning_count(e) == 0 and self.fire.particle_count(e) == 0 and self.fire.lit_count(e) > 0:
                 success = 1
         return success
 

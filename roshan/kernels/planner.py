@@ -218,8 +218,8 @@ class PlannerKernels(EpisodeKernels):
         if timed_out != 0:
             terminal = 1
             reason = TIMEOUT
-        if self.fire.burning_count(e) == 0:
-            terminal = 1  # put out, or burned down on its own
+        if self.fire.burning_count(e) == 0 and self.fire.lit_count(e) > 0:
+            terminal = 1  # put out, or burned down on its own (a fire there was: no fire is no success)
         return ti.Vector([terminal, reason])
 
     @ti.func
