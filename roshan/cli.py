@@ -155,13 +155,14 @@ def maps_show(name_or_path, band):
 
 
 @maps.command("crop")
-@click.argument("source", type=click.Path(dir_okay=False))
+@click.argument("source")
 @click.option("--bounds", nargs=4, type=float, required=True, metavar="W S E N", help="Window to cut out.")
 @click.option("--crs", default=None, help="CRS of --bounds (e.g. EPSG:4326); default: the raster's own.")
 @click.option("--output", "-o", type=click.Path(dir_okay=False), required=True, help="GeoTIFF to write.")
 @click.option("--replace", is_flag=True, help="Overwrite an existing --output file (without it it is refused).")
 def maps_crop(source, bounds, crs, output, replace):
-    """Cut a window out of a (possibly huge) CLC+ raster, reading only that window."""
+    """Cut a window out of a (possibly huge) CLC+ raster (a GeoTIFF path or a bundled map's name), reading only
+    that window."""
     from roshan.maps import crop_map, describe_map
 
     with reported():
@@ -205,7 +206,8 @@ def config_show(section):
 @ARCH
 @THREADS
 def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threads):
-    """Train a FlyAgent (PPO, TD3 or IQL per train.algo) from CONFIG (see configs/), or --resume a run.
+    """Train a FlyAgent (train.algo: ppo, td3 or iql) or the planner over a frozen FlyAgent (train.algo: planner,
+    PPO; configs/planner.yaml) from CONFIG (see configs/), or --resume a run.
 
     Writes runs/<name>/: config.yaml, checkpoints/{latest,best_reward,best_objective}.pt, tb/ (TensorBoard)
     and eval/ (episodes.csv, summary.json, plots). With train.auto_train = k, k runs with seeds seed..seed+k-1

@@ -646,7 +646,7 @@ def crop_map(
     Only the window is read, so this works on the ~100 GB pan-European CLC+ product.
 
     Args:
-        src: Source raster path.
+        src: Source raster path, or a bundled map's name (``35x36_Woods``).
         bounds: (west, south, east, north); in the raster's CRS unless ``bounds_crs`` is given.
         out: Output GeoTIFF path (parent directories are created).
         bounds_crs: CRS of ``bounds`` (e.g. ``"EPSG:4326"``, lon/lat order); transformed to the
@@ -663,8 +663,8 @@ def crop_map(
         OutputError: If ``out`` exists and ``replace`` is not set.
     """
     src_path, out_path = Path(src), Path(out)
-    if not src_path.exists():
-        raise MapError(f"{src_path}: file not found")
+    if not src_path.exists():  # a bundled map's name, as every other command takes it (else the closest names)
+        src_path = bundled_map_path(str(src))
     if out_path.exists() and out_path.resolve() == src_path.resolve():
         raise MapError(f"{src_path}: output path equals the source; choose another file")
     refuse_overwrite(out_path, "the cropped map", replace)

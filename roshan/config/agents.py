@@ -24,7 +24,8 @@ PRESETS: dict[str, dict[str, float]] = {
 class RewardConfig(Section):
     """A preset of coefficients; any field set here overrides the preset's value."""
 
-    preset: str = choice("thesis", tuple(PRESETS))
+    preset: str = choice("thesis", tuple(PRESETS),
+                         doc="coefficients: thesis (Table 5.3), optuna_best (5.4) or optuna_top10 (5.5)")
     goal: float | None = None  # GoalReached
     boundary: float | None = None  # BoundaryTerminal
     extinguish: float | None = None  # Extinguish (complex policy)
@@ -45,7 +46,7 @@ class FlyConfig(Section):
     fire_goal_percentage: float = num(1.0, 0.0, 1.0, doc="chance an initial goal is a fire (else a corner)")
     frames: int = num(3, 1, 8, doc="stacked observation frames (index 0 = newest)")
     # True reproduces the original's sticky Extinguish reward flag (docs/model/agents.md §7.1)
-    sticky_extinguish: bool = False
+    sticky_extinguish: bool = False  # true: the reference's defect, the Extinguish flag stays set after its step
     frame_skips: int = num(1, 1, 16, doc="physics steps per action; only the last one's reward is returned")
     rewards: RewardConfig = field(default_factory=RewardConfig)
 
@@ -68,8 +69,11 @@ class PlannerRewardConfig(Section):
     DistanceProgress, SpreadPrevention (and with the water limit WaterRefill, EmptyTank) and makes the
     groundstation and same-goal terms per drone as in the newest code."""
 
-    preset: str = choice("optuna_top10", tuple(PLANNER_PRESETS))
-    version: str = choice("thesis", ("thesis", "newest"))
+    preset: str = choice("optuna_top10", tuple(PLANNER_PRESETS),
+                         doc="coefficients: optuna_best (Table 5.7) or optuna_top10 (Table 5.9)")
+    version: str = choice("thesis", ("thesis", "newest"),
+                          doc="thesis: the thesis-era terms; newest: adds DistanceProgress, SpreadPrevention and "
+                              "the water terms, per-drone groundstation and same-goal terms")
     goal: float | None = None  # GoalReached
     burned: float | None = None  # MapBurnedTooMuch
     ground: float | None = None  # FlyingTowardsGroundStation
@@ -96,7 +100,9 @@ class PlannerConfig(Section):
     num_explorers: int = num(12, 1, 64, doc="ExploreFlyAgents (thesis 12; the root configs say 3)")
     explorer_speed: float = num(20.0, 0.0, lo_open=True, doc="explorer max speed (m/s)")
     explorer_view_range: int = num(20, 2, doc="explorer view range (cells); also the meander spacing")
-    meander: str = choice("newest", ("newest", "thesis"))
+    meander: str = choice("newest", ("newest", "thesis"),
+                          doc="explorer sweep: newest (the last stripe reaches the map edge) or thesis (capped "
+                              "stripe, docs/model/agents.md §11.1)")
     explorer_index_bound: str = choice("longest", ("first", "longest"),
                                        doc="longest: every explorer flies its whole path, so every cell is seen; "
                                            "first: the reference (explorer 0's path bounds the shared index)")

@@ -20,8 +20,8 @@ class TrainConfig(Section):
     max_minutes: float = num(0.0, 0.0, doc="wall-clock budget of one run; 0 = no limit")
     objective_window: int = num(100, 1, doc="training episodes in the success-rate objective")
     eval_every: int = num(0, 0, doc="evaluate every K updates; 0 = only at the end")
-    eval_episodes: int = num(200, 1)
-    eval_envs: int = num(50, 1)
+    eval_episodes: int = num(200, 1, doc="episodes of each evaluation (periodic and at the end of training)")
+    eval_envs: int = num(50, 1, doc="envs stepped together in an evaluation (and `roshan eval`'s default --envs)")
     eval_video_frames: int = num(30, 0, doc="periodic evaluation: frames of env 0's first episode logged to "
                                             "TensorBoard as a video (every k-th step, to fit); 0 = no video")
     auto_train: int = num(1, 1, doc="independent runs (seeds seed, seed+1, ...) in sequence, then evaluation")
@@ -35,13 +35,14 @@ class OptimConfig(Section):
     """Optimiser and schedule. Defaults are the thesis-era ones: Adam(0.9, 0.999, eps 1e-5) with a cosine
     schedule of T_max 1e6 steps, stepped per gradient step (effectively constant over a run)."""
 
-    name: str = choice("adam", OPTIMIZER_NAMES)
-    beta1: float = num(0.9, 0.0, 1.0, hi_open=True)
-    beta2: float = num(0.999, 0.0, 1.0, hi_open=True)
-    eps: float = num(1e-5, 0.0, lo_open=True)
-    weight_decay: float = num(0.0, 0.0)
+    name: str = choice("adam", OPTIMIZER_NAMES, doc="the torch optimiser")
+    beta1: float = num(0.9, 0.0, 1.0, hi_open=True, doc="Adam-family first-moment decay")
+    beta2: float = num(0.999, 0.0, 1.0, hi_open=True, doc="Adam-family second-moment decay")
+    eps: float = num(1e-5, 0.0, lo_open=True, doc="added to the denominator (Adam, RMSprop)")
+    weight_decay: float = num(0.0, 0.0, doc="L2 penalty (adamw: decoupled)")
     momentum: float = num(0.0, 0.0, 1.0, doc="SGD / RMSprop momentum")
-    scheduler: str = choice("cosine", SCHEDULERS)
+    scheduler: str = choice("cosine", SCHEDULERS, doc="learning-rate schedule, stepped per gradient step; "
+                                                        "constant / none keep the rate")
     t_max: int = num(1_000_000, 1, doc="cosine: steps per half period")
     step_size: int = num(10_000, 1, doc="step: steps between decays")
     decay: float = num(0.99, 0.0, 1.0, lo_open=True, doc="step / exponential: factor per decay")
@@ -59,24 +60,27 @@ class PPOConfig(Section):
     are thesis Table 5.2 (E1, FlyAgent); the planner's Table 5.8 values are set in configs/planner*.yaml. The keys
     in :data:`FLY_ONLY_PPO_KEYS` shape the FlyAgent policy and are refused for the planner."""
 
-    lr: float = num(1.575e-4, 0.0, lo_open=True)
+    lr: float = num(1.575e-4, 0.0, lo_open=True, doc="learning rate")
     horizon: int = num(1200, 1, doc="transitions collected per update (FlyAgent: all drones' steps; planner: "
                                     "all envs' decisions)")
     batch_size: int = num(300, 1, doc="minibatch size in transitions")
-    k_epochs: int = num(3, 1)
-    gamma: float = num(0.9635, 0.0, 1.0)
+    k_epochs: int = num(3, 1, doc="passes over each rollout per update")
+    gamma: float = num(0.9635, 0.0, 1.0, doc="discount")
     lam: float = num(0.9, 0.0, 1.0, doc="GAE lambda")
-    eps_clip: float = num(0.2, 0.0, 1.0, lo_open=True)
-    value_loss_coef: float = num(0.5, 0.0)
-    entropy_coeff: float = num(0.01, 0.0)
+    eps_clip: float = num(0.2, 0.0, 1.0, lo_open=True, doc="clip range of the probability ratio")
+    value_loss_coef: float = num(0.5, 0.0, doc="weight of the value loss")
+    entropy_coeff: float = num(0.01, 0.0, doc="weight of the entropy bonus")
     max_grad_norm: float = num(0.5, 0.0, doc="per parameter group; 0 = off (the thesis-era code never clipped)")
-    kl_early_stop: bool = False
-    kl_target: float = num(0.03, 0.0, lo_open=True)
-    kl_estimator: str = choice("k1", ("k1", "k2"))
-    log_std: str = choice("learned", ("learned", "train_step_decay", "log_step_decay"))
-    decay_rate: float = num(0.9999, 0.0, 1.0, lo_open=True)
-    share_encoder: bool = False
-    use_tanh_dist: bool = False
+    kl_early_stop: bool = False  # skip the rest of an epoch once the approx KL reaches kl_target
+    kl_target: float = num(0.03, 0.0, lo_open=True, doc="approx KL that stops an epoch (with kl_early_stop)")
+    kl_estimator: str = choice("k1", ("k1", "k2"), doc="approx KL estimator: k1 = mean(old - new log p), "
+                                                      "k2 = mean((r - 1) - log r)")
+    log_std: str = choice("learned", ("learned", "train_step_decay", "log_step_decay"),
+                          doc="FlyAgent policy's log std: learned, or a fixed schedule per update "
+                              "(docs/model/learning.md §4)")
+    decay_rate: float = num(0.9999, 0.0, 1.0, lo_open=True, doc="per-update factor of the log_std decay schedules")
+    share_encoder: bool = False  # actor and critic read one encoder
+    use_tanh_dist: bool = False  # TanhNormal policy; false: a Gaussian around tanh(mu)
     tanh_entropy: str = choice("base", ("base", "squashed"),
                                doc="TanhNormal's entropy bonus: base = of the pre-tanh Normal (the reference; blind "
                                    "to saturation, so the mean drifts into tanh's tails), squashed = of the actions")
@@ -84,7 +88,7 @@ class PPOConfig(Section):
                                           "samples keep leaving tanh's flat tails and carry a gradient; 0 = off "
                                           "(the reference)")
     mean_bound_coef: float = num(1.0, 0.0, doc="weight of the mean_bound penalty in the PPO loss")
-    separate_optimizers: bool = False
+    separate_optimizers: bool = False  # one optimiser for the actor, one for the critic (needs share_encoder false)
     ema_decay: float = num(0.0, 0.0, 1.0, hi_open=True,
                            doc="> 0: deterministic actions (evaluation, best_eval, the saved policy) come from an "
                                "exponential moving average of the weights, decayed by this factor once per update "

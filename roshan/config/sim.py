@@ -81,7 +81,9 @@ class IgnitionConfig(Section):
     clusters: int = num(2, 1, doc="number of clusters (or rings)")
     spread_prob: float = num(0.5, 0.0, 1.0, doc="base probability that a cluster grows into a neighbour")
     noise: float = num(1.0, 0.0, 2.0, doc="amplitude of the perturbation of spread_prob")
-    pattern: str = choice("cluster", ("cluster", "scattered", "ring", "random"))
+    pattern: str = choice("cluster", ("cluster", "scattered", "ring", "random"),
+                          doc="cluster: spreading clusters; scattered: single cells anywhere; ring: annuli around "
+                              "random centres; random: one of the three, drawn per episode")
     reseed: bool = True  # newest code: re-seed a trapped cluster until it has its share; false = thesis era (a maximum)
 
 
@@ -117,5 +119,7 @@ class SimConfig(Section):
 
     envs: int = num(1, 1, doc="environments advanced together (training: the batch the learner collects from)")
     seed: int = num(0, 0, 2**31 - 1, doc="seed of every random stream (training: also of torch and the shuffles)")
-    arch: str = choice("cpu", ("cpu", "cuda", "vulkan", "auto"))
+    arch: str = choice("cpu", ("cpu", "cuda", "vulkan", "auto"),
+                       doc="where the kernels run (--arch): auto = CUDA where present, else the CPU; vulkan is "
+                           "refused (its fire kernels run wrong)")
     threads: int = num(0, 0, doc="CPU threads; 0 = all cores")

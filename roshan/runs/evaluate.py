@@ -48,8 +48,9 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
     With ``frames_dir`` the frames of env 0's first episode are written there: frame 0 is the state right after
     the reset and the last frame the episode's final state (rendered before the same-step autoreset).
 
-    The progress bar counts episodes, and moves with the steps too: each env's running episode adds the
-    fraction of its step limit it has used (capped below one), so a batch of long episodes does not sit at 0.
+    The progress bar counts episodes, and on a terminal moves with the steps too: each env's running episode adds
+    the fraction of its step limit it has used (capped below one), so a batch of long episodes does not sit at 0.
+    Without a terminal it counts finished episodes only, in whole numbers.
     """
     E, N = env.num_envs, env.num_drones
     quota = math.ceil(episodes / E)
@@ -61,8 +62,12 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
         env.keep_final_frame = True
         _save_frame(env.render(), frames_dir, frame)
         frame += 1
+    # On a terminal the bar moves with the running episodes too (4.7/8); without one (a log file, CI) every line it
+    # prints stays, so it counts finished episodes only, in whole numbers.
+    fractional = progress_bar and sys.stderr.isatty()
     bar = tqdm(total=quota * E, unit="episode", disable=not progress_bar, desc="eval",
-               bar_format="{l_bar}{bar}| {n:.1f}/{total_fmt} episodes [{elapsed}<{remaining}]")
+               bar_format="{l_bar}{bar}| {n:" + (".1f" if fractional else ".0f") + "}/{total_fmt} episodes "
+                          "[{elapsed}<{remaining}]")
     steps = torch.zeros(E, dtype=torch.long)  # steps of each env's running episode, for the bar
     # env steps an episode may last: t_max counts physics steps, of which an env step runs frame_skips
     # (FlyAgent) or interval (planner)
@@ -90,7 +95,7 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
         if progress_bar:
             steps += 1
             steps[ended.cpu()] = 0
-            _advance_bar(bar, done_count, steps, quota, t_max)
+            _advance_bar(bar, done_count, steps if fractional else torch.zeros_like(steps), quota, t_max)
     bar.close()
     env.keep_final_frame = False
     kept = [(e, i, r) for e in range(E) for i, r in enumerate(rows[e])][:episodes]

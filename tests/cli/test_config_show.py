@@ -40,3 +40,13 @@ def test_an_unknown_section_is_one_error_with_a_suggestion():
     assert res.exit_code != 0 and "unknown config section 'fir'" in res.output and "did you mean 'fire'" in res.output
     res = show("zzz")
     assert res.exit_code != 0 and "sections: map, fire," in res.output
+
+
+def test_every_key_has_a_doc():
+    """`config show` documents every key (issue 32, item 17): a new key needs a `doc=` or a `# comment`."""
+    from roshan.config import Config
+    from roshan.config.describe import describe_keys
+
+    undocumented = [r["key"] for r in describe_keys(Config) if not r["doc"].strip()]
+    assert undocumented == [], f"config keys without a doc: {undocumented}"
+    assert "evaluation" in " ".join(row(show("train.eval_episodes").output, "train.eval_episodes"))
