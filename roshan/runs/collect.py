@@ -138,23 +138,6 @@ class RolloutCollector:
         self.actions[t], self.log_probs[t], self.values[t] = sample.stored, sample.log_prob, sample.value
 
 
-class PPOLearner:
-    """One iteration = a rollout of ``ppo.horizon`` transitions, then one PPO update. Steps count env steps
-    (planner: decisions, each ``planner.interval`` low-level steps of every env)."""
-
-    def __init__(self, cfg: Config, env, agent: PPO):
-        self.rows = level_rows(cfg)
-        self.steps = rollout_steps(cfg, self.rows)
-        self.collector = RolloutCollector(env, agent, self.rows, self.steps)
-        self.agent, self.env = agent, env
-
-    def iterate(self, generator: torch.Generator) -> tuple[int, dict, np.ndarray]:
-        rollout = self.collector.collect(generator)
-        metrics = self.agent.update(rollout, generator)
-        rows = ended_rows(self.collector.ended, self.collector.stats)
-        return self.steps * self.env.num_envs, metrics, rows
-
-
 def next_observation(obs: dict, info: dict, ended: torch.Tensor) -> dict[str, torch.Tensor]:
     """Per-drone next observations (E*N, ...): the env's ``final_obs`` where the episode ended this step."""
     out = {}

@@ -13,6 +13,36 @@ import yaml
 from PIL import Image
 from tensorboard.compat.proto.summary_pb2 import Summary
 
+# An update's metrics under the original's TensorBoard tags (docs/model/learning.md §11)
+UPDATE_TAGS = {"Rewards/Rewards_Raw": "rewards_raw", "Rewards/Rewards_norm": "rewards_scaled",
+               "Rewards/Returns": "returns", "Rewards/Advantages": "advantages", "Rewards/Values": "values",
+               "Training/Approx_KL": "approx_kl", "Training/Clip_Fraction": "clip_fraction",
+               "Training/actor_loss": "actor_loss", "Training/value_loss": "value_loss",
+               "Training/entropy_loss": "entropy", "Training/log_std": "std", "Training/LR": "lr",
+               "Training/saturated": "saturated", "Training/mean_excess": "mean_excess",
+               "Training/grad_norm_actor": "grad_norm_actor", "Training/grad_norm_critic": "grad_norm_critic",
+               "Sanitylogs/Explained_Variance": "explained_variance", "Perf/steps_per_s": "steps_per_s"}
+
+
+def log_update(writer, step: int, metrics: dict) -> None:
+    """An update's metrics (NaN ones skipped: a metric the update could not measure)."""
+    for tag, key in UPDATE_TAGS.items():
+        if key in metrics and metrics[key] == metrics[key]:
+            writer.add_scalar(tag, metrics[key], step)
+    for key, value in metrics.items():  # TD3 / IQL metrics are named "group/name" already
+        if "/" in key and value == value:
+            writer.add_scalar(key, value, step)
+
+
+def log_episodes(writer, step: int, ep: dict, reasons: tuple[str, ...]) -> None:
+    """The training episodes that ended since the last write: success, return, length and each failure's rate
+    (only the failures this level's records can hold)."""
+    writer.add_scalar("Episodes/success_rate", ep["success"], step)
+    writer.add_scalar("Episodes/return", ep["return"], step)
+    writer.add_scalar("Sanitylogs/Episode_Steps", ep["steps"], step)
+    for name in reasons:
+        writer.add_scalar(f"Episodes/{name}_rate", ep[f"{name}_rate"], step)
+
 
 def add_config(writer, config: dict, step: int = 0) -> None:
     """The resolved config as YAML in the text tab (``Run/config``)."""

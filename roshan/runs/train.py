@@ -6,7 +6,6 @@ iteration the loop logs, writes ``latest`` (and ``best_*`` when their metric tie
 budget. A killed run resumes from ``latest`` with its counters, optimisers, reward scaler and RNG states.
 """
 
-import collections
 import contextlib
 import json
 import math
@@ -14,7 +13,7 @@ import shlex
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -23,178 +22,29 @@ from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
 from roshan.algos.agents import make_agent
-from roshan.algos.buffers import ReplayBuffer
 from roshan.algos.frozen import policy_fn
-from roshan.algos.networks import flatten_drones
 from roshan.checkpoints import (
     check_fits,
-    check_same_model,
     checkpoint_path,
     config_dict,
     config_of_checkpoint,
     load_checkpoint,
-    new_run_dir,
-    newest_checkpoint,
     resolve_checkpoint,
     run_lock,
     save_checkpoint,
 )
 from roshan.config import Config, apply_overrides, dump_config
-from roshan.env.fly import FlyVectorEnv
-from roshan.episode import EPISODE_FIELDS, FAILURES, REASONS
 from roshan.io import OutputError, prepare_output, writing
-from roshan.runs.collect import PPOLearner, next_observation, rollout_steps
+from roshan.runs.collect import rollout_steps
 from roshan.runs.envs import make_env
+from roshan.runs.episode_log import EpisodeLog
 from roshan.runs.evaluate import TRAINING_NOTES, evaluate_run, run_episodes
+from roshan.runs.learners import make_learner
 from roshan.runs.report.stats import evaluation_scalars, summarize
 from roshan.runs.report.tables import format_table
-from roshan.runs.tboard import EpisodeFrames, add_config, add_hparams, add_video
+from roshan.runs.resume import resume_config, resume_state, start_run  # noqa: F401  (resume_config: cli's name)
+from roshan.runs.tboard import EpisodeFrames, add_config, add_hparams, add_video, log_episodes, log_update
 from roshan.runtime import current_arch, ensure_taichi, init_taichi, torch_device
-
-# ------------------------------------------------------------------------------------------------ episodes
-
-
-@dataclass
-class EpisodeLog:
-    """Training episodes: the success window behind the objective, and what ended since the last write."""
-
-    window: int = 100
-    episodes: int = 0
-    recent: collections.deque = field(default_factory=collections.deque)
-    pending: list = field(default_factory=list)  # rows of EPISODE_FIELDS since the last write
-
-    def add(self, rows: np.ndarray) -> None:
-        for row in rows:
-            self.recent.append(float(row[0]))
-            if len(self.recent) > self.window:
-                self.recent.popleft()
-        self.episodes += len(rows)
-        self.pending.extend(rows.tolist())
-
-    @property
-    def objective(self) -> float:
-        """Success rate over the last ``window`` training episodes; 0 until that many exist
-        (docs/model/learning.md §9)."""
-        return float(np.mean(self.recent)) if len(self.recent) >= self.window else 0.0
-
-    @property
-    def success_so_far(self) -> float:
-        return float(np.mean(self.recent)) if self.recent else float("nan")
-
-    def drain(self) -> dict[str, float]:
-        """Means over the episodes since the last call (empty dict if none ended)."""
-        if not self.pending:
-            return {}
-        rows = np.asarray(self.pending)
-        self.pending = []
-        reasons = rows[:, EPISODE_FIELDS.index("reason")].astype(int)
-        out = {"success": rows[:, 0].mean(), "steps": rows[:, EPISODE_FIELDS.index("steps")].mean(),
-               "return": rows[:, EPISODE_FIELDS.index("return")].mean(), "count": float(len(rows))}
-        for name in FAILURES:
-            out[f"{name}_rate"] = float((reasons == REASONS.index(name)).mean())
-        return out
-
-    def state_dict(self) -> dict:
-        return {"window": self.window, "episodes": self.episodes, "recent": list(self.recent)}
-
-    def load_state_dict(self, s: dict) -> None:
-        self.window, self.episodes, self.recent = s["window"], s["episodes"], collections.deque(s["recent"])
-
-
-class OffPolicyCollector:
-    """Steps the env with an off-policy agent's exploring actions (``act``) into a replay buffer, one transition
-    per drone; ``not_done`` is 0 only at a real terminal (a timeout bootstraps from ``final_obs``)."""
-
-    def __init__(self, env: FlyVectorEnv, agent, buffer):
-        self.env, self.agent, self.buffer = env, agent, buffer
-        self.obs, _ = env.reset()
-
-    def step(self, generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        env, N = self.env, self.env.num_drones
-        o = {k: v.clone() for k, v in flatten_drones(self.obs).items()}
-        actions = self.agent.act(o, generator=generator)
-        self.obs, rewards, terms, truncs, info = env.step(actions.view(env.num_envs, N, 2))
-        ended = info["_episode_stats"]
-        nxt = next_observation(self.obs, info, ended.repeat_interleave(N))
-        self.buffer.add(o, actions, rewards.flatten(), (~terms).repeat_interleave(N).float(), nxt)
-        stats = torch.stack([info["episode_stats"][k] for k in EPISODE_FIELDS], dim=-1)
-        return rewards, ended, stats
-
-
-class TD3Learner:
-    """One iteration = ``env_steps_per_iteration`` env steps, each followed by one TD3 update call (k_epochs
-    gradient iterations) once the buffer holds ``min_memory_size`` transitions (docs/model/learning.md §7)."""
-
-    env_steps_per_iteration = 64
-
-    def __init__(self, cfg: Config, env: FlyVectorEnv, agent):
-
-        obs, _ = env.reset()
-        shapes = {k: tuple(v.shape[2:]) for k, v in obs.items()}
-        self.buffer = ReplayBuffer(cfg.td3.memory_size, shapes, device=env.device)
-        self.collector = OffPolicyCollector(env, agent, self.buffer)
-        self.agent, self.env = agent, env
-
-    def iterate(self, generator: torch.Generator) -> tuple[int, dict, np.ndarray]:
-        metrics: dict[str, list[float]] = collections.defaultdict(list)
-        rows, rewards = [], []
-        for _ in range(self.env_steps_per_iteration):
-            r, ended, stats = self.collector.step(generator)
-            rewards.append(float(r.mean()))
-            if bool(ended.any()):
-                rows.append(stats[ended].cpu().numpy())
-            if self.agent.is_ready(self.buffer):
-                for k, v in self.agent.update(self.buffer, generator).items():
-                    metrics[k].append(v)
-        out = {k: float(np.mean(v)) for k, v in metrics.items()}
-        out["rewards_raw"] = float(np.mean(rewards))
-        out["buffer"] = float(len(self.buffer))
-        rows_arr = np.concatenate(rows) if rows else np.zeros((0, len(EPISODE_FIELDS)), np.float32)
-        return self.env_steps_per_iteration * self.env.num_envs, out, rows_arr
-
-
-class IQLLearner:
-    """Iterations 1..offline_updates: one pass each over the saved dataset (no env steps); then, if
-    ``online_updates`` > 0, one iteration = ``policy_freq`` env steps with the IQL actor appended to the
-    buffer, then one update of ``k_epochs`` minibatches (docs/model/learning.md §8)."""
-
-    def __init__(self, cfg: Config, env: FlyVectorEnv, agent):
-
-        if not cfg.train.buffer_path:
-            raise ValueError("train.buffer_path: IQL learns from a saved replay buffer; record one with "
-                             "`roshan eval RUN --save-buffer N FILE`")
-        self.buffer = ReplayBuffer.load(cfg.train.buffer_path, device=env.device)
-        if cfg.iql.online_updates > 0:  # room for the online transitions after the dataset
-            extra = cfg.iql.online_updates * cfg.iql.policy_freq * env.num_envs * env.num_drones
-            self.buffer = ReplayBuffer.load(cfg.train.buffer_path, device=env.device,
-                                            capacity=len(self.buffer) + extra)
-        self.cfg, self.agent, self.env = cfg, agent, env
-        self.collector = None
-        self.offline_done = 0
-
-    def iterate(self, generator: torch.Generator) -> tuple[int, dict, np.ndarray]:
-        empty = np.zeros((0, len(EPISODE_FIELDS)), np.float32)
-        if self.offline_done < self.cfg.iql.offline_updates:
-            self.offline_done += 1
-            metrics = self.agent.offline_pass(self.buffer, generator)
-            metrics["rewards_raw"] = float(self.buffer.rewards[:len(self.buffer)].mean())
-            return 0, metrics, empty
-        if self.collector is None:
-            self.collector = OffPolicyCollector(self.env, self.agent, self.buffer)
-        rows = []
-        for _ in range(self.cfg.iql.policy_freq):
-            _, ended, stats = self.collector.step(generator)
-            if bool(ended.any()):
-                rows.append(stats[ended].cpu().numpy())
-        metrics = self.agent.update(self.buffer, generator)
-        metrics["rewards_raw"] = float("nan")
-        return self.cfg.iql.policy_freq * self.env.num_envs, metrics, np.concatenate(rows) if rows else empty
-
-
-def make_learner(cfg: Config, env, agent):
-    learners = {"ppo": PPOLearner, "td3": TD3Learner, "iql": IQLLearner, "planner": PPOLearner}
-    return learners[cfg.train.algo](cfg, env, agent)
-
 
 # ------------------------------------------------------------------------------------------------ the loop
 
@@ -395,30 +245,12 @@ class Trainer:
             self.saved_update = state["progress"]["updates"]
 
     def _log(self, m: dict) -> None:
-        w, step = self.writer, self.log_step
-        tags = {"Rewards/Rewards_Raw": "rewards_raw", "Rewards/Rewards_norm": "rewards_scaled",
-                "Rewards/Returns": "returns", "Rewards/Advantages": "advantages", "Rewards/Values": "values",
-                "Training/Approx_KL": "approx_kl", "Training/Clip_Fraction": "clip_fraction",
-                "Training/actor_loss": "actor_loss", "Training/value_loss": "value_loss",
-                "Training/entropy_loss": "entropy", "Training/log_std": "std", "Training/LR": "lr",
-                "Training/saturated": "saturated", "Training/mean_excess": "mean_excess",
-                "Training/grad_norm_actor": "grad_norm_actor", "Training/grad_norm_critic": "grad_norm_critic",
-                "Sanitylogs/Explained_Variance": "explained_variance", "Perf/steps_per_s": "steps_per_s"}
-        for tag, key in tags.items():
-            if key in m and m[key] == m[key]:
-                w.add_scalar(tag, m[key], step)
-        for key, value in m.items():  # TD3 / IQL metrics are named "group/name" already
-            if "/" in key and value == value:
-                w.add_scalar(key, value, step)
+        log_update(self.writer, self.log_step, m)
         ep = self.episodes.drain()
         if ep:
-            w.add_scalar("Episodes/success_rate", ep["success"], step)
-            w.add_scalar("Episodes/return", ep["return"], step)
-            w.add_scalar("Sanitylogs/Episode_Steps", ep["steps"], step)
-            for name in self.env.failure_reasons:  # only the failures this level's records can hold
-                w.add_scalar(f"Episodes/{name}_rate", ep[f"{name}_rate"], step)
+            log_episodes(self.writer, self.log_step, ep, self.env.failure_reasons)
         if len(self.episodes.recent) >= self.episodes.window:
-            w.add_scalar("Training/Objective", self.episodes.objective, step)
+            self.writer.add_scalar("Training/Objective", self.episodes.objective, self.log_step)
 
     def _periodic_eval(self) -> None:
         """Deterministic episodes with the current weights on a separate batch of envs (fixed seed, so the
@@ -461,53 +293,6 @@ class Trainer:
 
 
 # ------------------------------------------------------------------------------------------------ entry points
-
-
-def start_run(cfg: Config, root: str | Path = "runs", name: str | None = None) -> Path:
-    """Create the run folder and write the resolved config."""
-    run_dir = new_run_dir(root, name or f"{cfg.train.algo}_{time.strftime('%Y%m%d-%H%M%S')}")
-    dump_config(cfg, run_dir / "config.yaml")
-    return run_dir
-
-
-def resume_config(run_dir: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Config:
-    """The config a resumed run continues with: its newest checkpoint's (:func:`newest_checkpoint`: the truth,
-    ``config.yaml`` may be damaged or stale), plus ``overrides``. Writes nothing: :func:`train` records the result
-    in ``config.yaml`` once it holds the run's lock, so that a later resume keeps these overrides. A folder without
-    any checkpoint is refused (FileNotFoundError) rather than trained from zero over its files."""
-    run_dir = Path(run_dir)
-    path = newest_checkpoint(run_dir)
-    if path is None:
-        if not run_dir.is_dir():
-            raise FileNotFoundError(f"{run_dir}: no such run folder to resume")
-        config = run_dir / "config.yaml"
-        start = (f"roshan train {config}" if config.is_file() and config.read_text().strip()
-                 else "roshan train CONFIG")
-        raise FileNotFoundError(f"{run_dir}: no checkpoint to resume from (checkpoints/ holds no latest.pt or "
-                                f"best_*.pt); start a new run instead: {start}")
-    state = load_checkpoint(path)
-    saved = config_of_checkpoint(state, str(path))
-    cfg = apply_overrides(saved, overrides)
-    # the whole state is checked here, before training starts: a refused resume leaves the run folder as it was
-    check_fits(make_agent(cfg), state["agent"], cfg, saved, str(path), weights_only=False)
-    return cfg
-
-
-def resume_state(run_dir: Path, cfg: Config) -> tuple[dict | None, Path | None]:
-    """The newest checkpoint of ``run_dir`` (:func:`newest_checkpoint`) after checking it fits ``cfg``, and its
-    path; (None, None) if there is none yet. Where it is not ``latest`` one line on stderr says which it is."""
-    latest = checkpoint_path(run_dir, "latest")
-    for stale in latest.parent.glob(".*.tmp"):  # a write the killed run did not finish; the old file is whole
-        stale.unlink()
-    path = newest_checkpoint(run_dir)
-    if path is None:
-        return None, None
-    state = load_checkpoint(path)
-    check_same_model(cfg, config_of_checkpoint(state, str(path)), str(path))
-    if path != latest:
-        print(f"{run_dir}: no checkpoints/latest.pt; resuming from the newest checkpoint, {path} (update "
-              f"{state['progress']['updates']})", file=sys.stderr)
-    return state, path
 
 
 def train(cfg: Config, run_dir: Path, resume: bool = False, progress_bar: bool = True,

@@ -10,7 +10,7 @@ from pathlib import Path
 import optuna
 
 from roshan.config import Config, from_dict, load_run_config, to_dict
-from roshan.runs.train import rollout_steps
+from roshan.runs.collect import rollout_steps
 from roshan.study.errors import StudyError
 from roshan.study.space import SearchSpace, load_space, parse_space
 

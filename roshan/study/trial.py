@@ -17,7 +17,8 @@ import optuna
 from optuna.trial import TrialState
 
 from roshan.config import Config
-from roshan.runs.train import start_run, train
+from roshan.runs.resume import start_run
+from roshan.runs.train import train
 from roshan.study.recipe import Recipe
 from roshan.study.space import with_values
 from roshan.study.storage import WORKER_ATTR, RetryStaleTrial, experimental, is_url, open_storage, worker_record
