@@ -41,6 +41,7 @@ from roshan.experiment.spec import Run, Spec, SpecError
 from roshan.io import prepare_output, write_atomic, writing
 from roshan.runs.envs import make_env
 from roshan.runs.evaluate import run_episodes, save_buffer, summarize, write_outputs
+from roshan.runs.learners import check_learnable
 from roshan.runs.provenance import code_version
 from roshan.runs.train import ensure_taichi_for, train
 from roshan.runtime import torch_device
@@ -147,7 +148,10 @@ def queue_reruns(study: optuna.Study, spec: Spec, patterns: tuple[str, ...],
 def check_runs(spec: Spec, stored: dict, study: optuna.Study) -> None:
     """Refuse a spec under which a run that has started would mean something else (config, controller,
     evaluation); runs still waiting may change."""
-    started = {run_key(t) for t in study.get_trials(deepcopy=False) if t.state != TrialState.WAITING}
+    trials = study.get_trials(deepcopy=False)
+    # a run whose every trial failed has no result to mean something else: it may take new settings (its folder,
+    # made under the old ones, is set aside when it starts again: claim_folder)
+    started = {run_key(t) for t in trials if t.state not in (TrialState.WAITING, TrialState.FAIL)}
     changed = [k for k, fp in spec.fingerprints().items() if stored["runs"].get(k, fp) != fp and k in started]
     if changed:
         raise SpecError(f"{spec.path}: experiment {spec.name!r} holds runs made with other settings under the same "
@@ -289,6 +293,7 @@ def execute_run(run: Run, folder: Path, extra: tuple[str, ...] = (), progress_ba
     if cond.buffer is not None:
         extra += (f"train.buffer_path={ensure_buffer(cond, folder.parent.parent / 'buffers')}",)
     cfg = cond.run_config(run.seed, extra)
+    claim_folder(folder, run.fingerprint())
     prepare_output(folder / "checkpoints", "the run folder")
     ensure_taichi_for(cfg)
     start = time.time()
@@ -321,6 +326,19 @@ def execute_run(run: Run, folder: Path, extra: tuple[str, ...] = (), progress_ba
     with writing("the run's result", folder / "result.json"):
         write_atomic(folder / "result.json", (json.dumps(result, indent=2) + "\n").encode())
     return result
+
+
+def claim_folder(folder: Path, fingerprint: str) -> None:
+    """Mark ``folder`` as the run with ``fingerprint``; a folder another fingerprint made (a failed run whose
+    condition has changed since) is renamed aside, ``<folder>.superseded-<its fingerprint>``, not continued."""
+    mark = folder / "fingerprint"
+    if mark.is_file() and (old := mark.read_text().strip()) != fingerprint:
+        aside = folder.with_name(f"{folder.name}.superseded-{old}")
+        folder.rename(aside)
+        print(f"{folder}: made under other settings (fingerprint {old}); set aside as {aside}", file=sys.stderr)
+    if not mark.is_file():
+        folder.mkdir(parents=True, exist_ok=True)
+        write_atomic(mark, (fingerprint + "\n").encode())
 
 
 def evaluate_weights(run: Run, cfg: Config, folder: Path, reasons: tuple[str, ...], which: str) -> dict:
@@ -419,6 +437,17 @@ class ExperimentLauncher(Launcher):
                 self.procs[slot] = self.spawn(slot)
 
 
+def check_trainable(spec: Spec, only: tuple[str, ...] = ()) -> None:
+    """Refuse, before any worker starts, a condition whose runs could not start training (a rollout that does not
+    split over its envs): found here it names the condition, found by a worker it fails each seed in turn."""
+    for condition in spec.conditions:
+        if condition.trains and (not only or condition.name in only):
+            try:
+                check_learnable(condition.run_config(condition.seeds[0]))
+            except ValueError as e:
+                raise SpecError(f"{spec.path}: condition {condition.name}: {e}") from None
+
+
 def run_experiment(spec: Spec, root: str | Path = "runs", storage: str | None = None, workers: int = 1,
                    worker_args: list[str] | tuple = (), heartbeat: int | None = 60, max_retry: int | None = 3,
                    echo: Callable[[str], None] = print, poll: float = 1.0, only: tuple[str, ...] = (),
@@ -427,6 +456,7 @@ def run_experiment(spec: Spec, root: str | Path = "runs", storage: str | None = 
     processes on this machine (only the runs of the conditions ``only`` names, when given: the whole spec is
     still created, so other runs keep their place for a later call), after queueing the finished runs of the
     conditions ``rerun`` names again; returns the study."""
+    check_trainable(spec, only)
     url = spec_storage(spec, root, storage)
     store = open_storage(url, heartbeat, max_retry, repair=True, echo=echo)
     study = prepare_experiment(store, spec, echo)

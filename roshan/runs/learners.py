@@ -128,6 +128,14 @@ class IQLLearner:
         return self.cfg.iql.policy_freq * self.env.num_envs, metrics, np.concatenate(rows) if rows else empty
 
 
+LEARNERS = {"ppo": PPOLearner, "td3": TD3Learner, "iql": IQLLearner, "planner": PPOLearner}
+
+
 def make_learner(cfg: Config, env, agent):
-    learners = {"ppo": PPOLearner, "td3": TD3Learner, "iql": IQLLearner, "planner": PPOLearner}
-    return learners[cfg.train.algo](cfg, env, agent)
+    return LEARNERS[cfg.train.algo](cfg, env, agent)
+
+
+def check_learnable(cfg: Config) -> None:
+    """Raise ValueError where ``cfg`` could not start training (checked before anything is built)."""
+    if LEARNERS[cfg.train.algo] is PPOLearner:
+        rollout_steps(cfg)  # a rollout must split over the rows of all envs

@@ -24,9 +24,13 @@ from roshan.experiment.runner import (
     RERUN_ATTR,
     STUDY_ATTR,
     check_runs,
+    check_trainable,
+    claim_folder,
     prepare_experiment,
     progress,
     queue_reruns,
+    run_dir,
+    run_experiment,
     run_key,
     run_worker,
 )
@@ -613,3 +617,42 @@ def test_a_changed_default_leaves_stored_fingerprints_alone(tmp_path, monkeypatc
         assert [s.fingerprints()["greedy/seed_0"] for s in (spec, fixed)] == [before[0], before[2]]
     monkeypatch.setattr(spec_module, "DEFAULTS_OF_RECORD", {})  # without the record, the changed default shows
     assert spec.fingerprints()["greedy/seed_0"] != before[0]
+
+
+def test_a_condition_that_cannot_train_is_refused_before_any_worker_starts(tmp_path):
+    """A rollout that does not split over the envs (horizon 8,192 over 3 envs x 4 drones) was found by each worker
+    in turn, failing every seed; the runner now refuses it up front, naming the condition, and records nothing."""
+    text = SPEC.replace("set: {{train.max_updates: 3, sim.envs: 4}}", "set: {{train.max_updates: 3, sim.envs: 3}}")
+    spec = load_spec(write_spec(tmp_path, text))
+    storage = tmp_path / "journal"
+    with pytest.raises(SpecError, match=r"spec.yaml: condition fast: ppo.horizon = \d+ must be a positive multiple "
+                                        r"of sim.envs x drones.num_drones = 12"):
+        run_experiment(spec, tmp_path, str(storage), echo=lambda _: None)
+    assert not storage.exists()
+    check_trainable(load_spec(write_spec(tmp_path)))  # the spec as it was trains
+
+
+def test_a_run_that_only_failed_may_change_and_its_old_folder_is_set_aside(tmp_path):
+    """P2_i5's seeds failed at their start (a horizon that did not split over 32 envs); its condition then had to
+    change. A run whose every trial failed has no result, so it may take new settings; its old folder is kept
+    under another name instead of being continued with the new ones."""
+    spec_path = write_spec(tmp_path)
+    spec, url, study = start(spec_path, tmp_path)
+
+    def fail(run, folder):
+        claim_folder(folder, run.fingerprint())
+        raise RuntimeError("a config it could not train")
+
+    with pytest.raises(RuntimeError):
+        run_worker(spec, url, tmp_path, execute=fail)  # fast/seed_0 failed
+    folder = run_dir(tmp_path, spec.name, spec.runs()[0])
+    old = (folder / "fingerprint").read_text().strip()
+    spec_path.write_text(spec_path.read_text().replace("train.max_updates: 3", "train.max_updates: 4"))
+    spec, _, _ = start(spec_path, tmp_path)  # accepted: the run never finished
+    new = spec.runs()[0].fingerprint()
+    assert new != old
+    claim_folder(folder, new)
+    assert (folder / "fingerprint").read_text().strip() == new
+    assert (folder.with_name(f"seed_0.superseded-{old}") / "fingerprint").read_text().strip() == old
+    claim_folder(folder, new)  # its own folder is continued
+    assert not folder.with_name(f"seed_0.superseded-{new}").exists()
