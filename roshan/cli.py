@@ -215,6 +215,7 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
     """
     from roshan.checkpoints import RunBusy
     from roshan.config import load_run_config
+    from roshan.runs import auto_train
     from roshan.runs import train as tr
 
     options = {"sim.arch": ("--arch", arch), "sim.threads": ("--threads", threads)}
@@ -228,9 +229,9 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
             results = [tr.train(cfg, run_dir, resume=True, progress_bar=not quiet, evaluate_at_end=not no_eval)]
         else:  # an error names where the bad value came from: CONFIG, --set or the option
             cfg = load_run_config(config_path, list(sets), flags=options)
-            results = tr.train_auto(cfg, root, name, progress_bar=not quiet, evaluate_at_end=not no_eval)
+            results = auto_train.train_auto(cfg, root, name, progress_bar=not quiet, evaluate_at_end=not no_eval)
     for res in results:
-        click.echo(tr.result_lines(res))
+        click.echo(auto_train.result_lines(res))
 
 
 @main.command("eval")

@@ -1,4 +1,4 @@
-"""The training loop: a FlyAgent vector env, an algorithm, TensorBoard, checkpoints, resume and evaluation.
+"""The training loop: a vector env (FlyAgent or planner), an algorithm, TensorBoard, checkpoints, resume and evaluation.
 
 One *iteration* collects data and updates once (PPO: a rollout of ``horizon`` transitions, then k epochs;
 TD3: a few env steps, each followed by an update; IQL: one offline pass over the dataset). After every
@@ -7,7 +7,6 @@ budget. A killed run resumes from ``latest`` with its counters, optimisers, rewa
 """
 
 import contextlib
-import json
 import math
 import shlex
 import sys
@@ -33,7 +32,7 @@ from roshan.checkpoints import (
     run_lock,
     save_checkpoint,
 )
-from roshan.config import Config, apply_overrides, dump_config
+from roshan.config import Config, dump_config
 from roshan.io import OutputError, prepare_output, writing
 from roshan.runs.collect import rollout_steps
 from roshan.runs.envs import make_env
@@ -41,8 +40,7 @@ from roshan.runs.episode_log import EpisodeLog
 from roshan.runs.evaluate import TRAINING_NOTES, evaluate_run, run_episodes
 from roshan.runs.learners import make_learner
 from roshan.runs.report.stats import evaluation_scalars, summarize
-from roshan.runs.report.tables import format_table
-from roshan.runs.resume import resume_config, resume_state, start_run  # noqa: F401  (resume_config: cli's name)
+from roshan.runs.resume import resume_config, resume_state  # noqa: F401  (resume_config: cli's name)
 from roshan.runs.tboard import EpisodeFrames, add_config, add_hparams, add_video, log_episodes, log_update
 from roshan.runtime import current_arch, ensure_taichi, init_taichi, torch_device
 
@@ -330,45 +328,3 @@ def ensure_taichi_for(cfg: Config) -> None:
     if current_arch() is None:
         init_taichi(cfg.sim.arch, cfg.sim.threads or None)
     ensure_taichi()
-
-
-def train_auto(cfg: Config, root: str | Path = "runs", name: str | None = None, progress_bar: bool = True,
-               evaluate_at_end: bool = True) -> list[dict]:
-    """``train.auto_train`` = k independent runs (seeds seed .. seed+k-1) in sequence, each evaluated; one
-    run goes straight to ``root/name``, several to ``root/name/seed_<s>``."""
-
-    k = cfg.train.auto_train
-    if k == 1:
-        return [train(cfg, start_run(cfg, root, name), progress_bar=progress_bar, evaluate_at_end=evaluate_at_end)]
-    parent = start_run(cfg, root, name)
-    results = []
-    for i in range(k):
-        seed_cfg = apply_overrides(cfg, [f"sim.seed={cfg.sim.seed + i}", "train.auto_train=1"])
-        run_dir = start_run(seed_cfg, parent, f"seed_{seed_cfg.sim.seed}")
-        results.append(train(seed_cfg, run_dir, progress_bar=progress_bar, evaluate_at_end=evaluate_at_end))
-    if evaluate_at_end:
-        _write_auto_summary(parent, results)
-    return results
-
-
-def _write_auto_summary(parent: Path, results: list[dict]) -> None:
-    """Per-seed success rates and their mean ± std (median), the way the thesis reports FlyAgent experiments."""
-
-    rates = np.array([r["eval"]["success_rate"] for r in results])
-    summary = {"runs": [r["run_dir"] for r in results], "success_rates": rates.tolist(),
-               "success_mean": float(rates.mean()), "success_std": float(rates.std(ddof=1)) if len(rates) > 1 else 0.0,
-               "success_median": float(np.median(rates))}
-    (Path(parent) / "auto_train.json").write_text(json.dumps(summary, indent=2) + "\n")
-
-
-def result_lines(res: dict) -> str:
-    """A few lines about a finished run for the console."""
-
-    mins = res["seconds"] / 60.0
-    head = (f"{res['run_dir']}: {res['updates']} updates, {res['env_steps']:,} env steps, {mins:.1f} min "
-            f"({res['env_steps'] / max(res['seconds'], 1e-9):,.0f} env-steps/s), {res['train_episodes']} episodes")
-    if res.get("stopped_by"):
-        head += f"; stopped: {res['stopped_by']}"
-    if "eval" not in res:
-        return head
-    return head + "\n" + format_table(res["eval"], f"evaluation of {Path(res['run_dir']).name}")
