@@ -190,34 +190,47 @@ def _plain(row: dict) -> dict:
     return out
 
 
-def plot(spec: Spec, rows: list[dict], path: Path) -> None:
-    """Success per condition: every seed as a dot, ours' mean ± std as a bar, the thesis's as a black error bar."""
+def success_figure(spec: Spec, rows: list[dict]):
+    """Success per condition, one row each in the spec's order (so a spec of any length stays one page wide):
+    ours' mean ± std as a bar with every seed as a dot, the thesis's as an orange square, and "not run" where a
+    condition has no result yet."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     names = [c.name for c in spec.conditions]
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.8 * len(names) + 2), 4.2))
+    fig, ax = plt.subplots(figsize=(10.0, max(2.5, 0.28 * len(names) + 1.4)))
+    labels = {"ours": "ours: mean ± std over seeds", "thesis": "thesis"}
     for i, (cond, row) in enumerate(zip(spec.conditions, rows, strict=True)):
         if row["seeds"]:
             s = row["success"]
-            ax.bar(i - 0.18, s.mean, 0.36, yerr=s.std, color="tab:blue", alpha=0.7, capsize=3,
-                   label="ours: mean ± std over seeds" if i == 0 else None)
+            ax.barh(i - 0.18, s.mean, 0.36, xerr=s.std, color="tab:blue", alpha=0.7, capsize=2,
+                    label=labels.pop("ours", None))
             pts = row.get("_points", [])
-            ax.plot([i - 0.18] * len(pts), pts, "k.", ms=4)
+            ax.plot(pts, [i - 0.18] * len(pts), "k.", ms=3)
+        else:
+            ax.text(1, i - 0.18, "not run", va="center", fontsize=7, color="0.4", style="italic")
         ref = cond.thesis.get("success")
         if ref is not None:
-            ax.errorbar(i + 0.18, ref.mean, yerr=0 if ref.std is None else ref.std, fmt="s", color="tab:orange",
-                        capsize=3, label="thesis" if "thesis" not in ax.get_legend_handles_labels()[1] else None)
-    ax.set_xticks(range(len(names)), names, rotation=30, ha="right")
-    ax.set_ylabel("success (% of evaluation episodes)")
-    ax.set_ylim(0, 105)
+            ax.errorbar(ref.mean, i + 0.18, xerr=0 if ref.std is None else ref.std, fmt="s", ms=4,
+                        color="tab:orange", capsize=2, label=labels.pop("thesis", None))
+    ax.set_yticks(range(len(names)), names, fontsize=8)
+    ax.invert_yaxis()  # the spec's first condition on top
+    ax.set_xlabel("success (% of evaluation episodes)")
+    ax.set_xlim(0, 105)
     ax.set_title(f"{spec.name}: success per condition (dots: seeds)")
-    ax.grid(axis="y", alpha=0.3)
-    ax.legend(loc="lower left", fontsize=8)
+    ax.grid(axis="x", alpha=0.3)
+    ax.legend(loc="lower right", fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    return fig
+
+
+def plot(spec: Spec, rows: list[dict], path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    fig = success_figure(spec, rows)
+    fig.savefig(path, dpi=110)  # 1,100 px wide whatever the number of conditions
     plt.close(fig)
 
 

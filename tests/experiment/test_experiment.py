@@ -656,3 +656,26 @@ def test_a_run_that_only_failed_may_change_and_its_old_folder_is_set_aside(tmp_p
     assert (folder.with_name(f"seed_0.superseded-{old}") / "fingerprint").read_text().strip() == old
     claim_folder(folder, new)  # its own folder is continued
     assert not folder.with_name(f"seed_0.superseded-{new}").exists()
+
+
+def test_the_success_plot_stays_one_page_wide_and_names_conditions_not_run(tmp_path):
+    """The thesis report's success.png was 4,004 px wide with 40 conditions side by side, and a condition without
+    results showed nothing. One row per condition now: the width is fixed, and such a condition says "not run"."""
+    import matplotlib.pyplot as plt
+
+    from roshan.experiment.report import condition_rows, success_figure
+
+    text = SPEC + "".join(f"  extra_{i}:\n    config: {{config}}\n    seeds: 1\n" for i in range(40))
+    spec = load_spec(write_spec(tmp_path, text))
+    results = {"fast/seed_0": fake_result(spec.runs()[0])}
+    rows = condition_rows(spec, results)
+    fig = success_figure(spec, rows)
+    try:
+        width, height = fig.get_size_inches() * 110
+        assert width <= 1600 and height > width / 2  # it grows down, not across
+        ax = fig.axes[0]
+        assert [t.get_text() for t in ax.get_yticklabels()][:3] == ["fast", "more_seeds", "greedy"]
+        not_run = [t for t in ax.texts if t.get_text() == "not run"]
+        assert len(not_run) == len(spec.conditions) - 1  # every condition but `fast`
+    finally:
+        plt.close(fig)
