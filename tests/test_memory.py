@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import taichi as ti
+import torch
 from click.testing import CliRunner
 
 from roshan import memory, runtime
@@ -105,8 +106,8 @@ def _bundle_and_buffers(env) -> tuple[int, int]:
     """(bytes of the env's simulators, their host arrays and the pool's pristine copies; bytes of its torch
     buffers). Closes the env (its bundle goes back to the pool, where the copies are)."""
     sims = [env.fire, env.drones, env.kernels, *([env.explorers, env.maps] if hasattr(env, "maps") else [])]
-    buffers = sum(t.nbytes for name, t in vars(env).items() if name in (
-        "_obs_buf", "_final_buf", "_rewards", "_dones", "_episode", "_fly_buf", "_explore_buf", "_explore_actions"))
+    # every tensor the env owns: views (terminations, observation dicts) have a base and share its bytes
+    buffers = sum(t.nbytes for t in vars(env).values() if isinstance(t, torch.Tensor) and t._base is None)
     env.close()
     entry = next(e for free in pool._free.values() for e in free if e.sims.fire is env.fire)
     copies = type("Copies", (), {})()

@@ -16,6 +16,7 @@ from roshan.config import CONTROLLERS, Config, PlannerConfig
 from roshan.env.base import VectorEnvCore
 from roshan.env.fly import fly_obs_views
 from roshan.kernels import observe
+from roshan.kernels.launch import PreparedLaunch
 from roshan.kernels.planner import obs_layout
 from roshan.kernels.pool import take_planner_sims
 from roshan.runtime import ensure_taichi, torch_device
@@ -78,6 +79,8 @@ class PlannerVectorEnv(VectorEnvCore):
         self._fly_obs = fly_obs_views(self._fly_buf, n)
         self._explore_obs = fly_obs_views(self._explore_buf, m)
         self._explore_actions = torch.zeros((num_envs, m, 2), device=dev)
+        self._fly_actions = torch.zeros((num_envs, n, 2), device=dev)
+        self._prepare_launches()
 
     def level_name(self) -> str:
         return f"PlannerVectorEnv ({self.controller})"
@@ -97,7 +100,7 @@ class PlannerVectorEnv(VectorEnvCore):
         ex_frames = self.explorer_policy.frames if self.explorer_policy else 1
         width = max(end for _, end in obs_layout(n, k).values())
         stacks = n * self.fly_policy.frames * observe.frame_width(n) + m * ex_frames * observe.frame_width(m)
-        return self._core_buffer_bytes(width, 1) + self.num_envs * 4 * (stacks + 2 * m)
+        return self._core_buffer_bytes(width, 1) + self.num_envs * 4 * (stacks + 2 * m + 2 * n)  # + actions
 
     def _define_spaces(self, n: int) -> None:
         box, k = gym.spaces.Box, self.max_candidates
@@ -121,19 +124,26 @@ class PlannerVectorEnv(VectorEnvCore):
     def _kernel_obs(self):
         return self._obs_buf, self._final_buf, self._fly_buf, self._explore_buf
 
+    def _prepare_launches(self) -> None:
+        """The per-step kernels over the env's own buffers, set up once (roshan.kernels.launch); the frozen
+        policies' actions are copied into ``_fly_actions`` / ``_explore_actions`` before each low-level step."""
+        k = self.kernels
+        self._launch_begin = PreparedLaunch(k.begin, self._rewards, self._dones)
+        self._launch_low_step = PreparedLaunch(k.low_step, self._fly_actions, self._explore_actions, self._fly_buf,
+                                               self._explore_buf, self._rewards, self._dones, self._episode)
+        self._launch_finish = PreparedLaunch(k.finish, self._obs_buf, self._rewards, self._dones, self._episode)
+
     def _advance(self, actions) -> None:
         """One planner decision: set the goals, fly ``interval`` low-level steps, reward, observe."""
-        k = self.kernels
-        k.begin(self._rewards, self._dones)
+        self._launch_begin()
         if self.controller == "planner":
-            k.apply(self._check_actions(actions))
+            self.kernels.apply(self._check_actions(actions))
         for _ in range(self.interval):
-            fly_actions = self.fly_policy(self._fly_obs).contiguous()
+            self._fly_actions.copy_(self.fly_policy(self._fly_obs))
             if self.explorer_policy is not None:
-                self._explore_actions = self.explorer_policy(self._explore_obs).contiguous()
-            k.low_step(fly_actions, self._explore_actions, self._fly_buf, self._explore_buf, self._rewards,
-                       self._dones, self._episode)
-        k.finish(self._obs_buf, self._rewards, self._dones, self._episode)
+                self._explore_actions.copy_(self.explorer_policy(self._explore_obs))
+            self._launch_low_step()
+        self._launch_finish()
 
     def _check_actions(self, actions) -> torch.Tensor:
         actions = self._actions_tensor(actions, (self.num_envs, self.num_drones), "envs, drones")

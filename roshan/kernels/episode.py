@@ -64,6 +64,7 @@ class EpisodeKernels:
                 frames: ti.types.ndarray(dtype=ti.f32, ndim=4), explore_frames: ti.types.ndarray(dtype=ti.f32, ndim=4),
                 seed_key: ti.u32, keep_final: ti.i32):
         """Reset the envs flagged in ``ended``, first copying their observation to ``final_obs``."""
+        ti.loop_config(serialize=self.fire.serial_envs)
         for v in range(self.fire.num_envs * self.fire.env_pad):
             e = v // self.fire.env_pad
             if v % self.fire.env_pad == 0 and self.ended[e] != 0:

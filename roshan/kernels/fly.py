@@ -64,6 +64,7 @@ class FlyKernels(EpisodeKernels):
     def step(self, actions: ti.types.ndarray(dtype=ti.f32, ndim=3), obs: ti.types.ndarray(dtype=ti.f32, ndim=4),
              rewards: ti.types.ndarray(dtype=ti.f32, ndim=2), dones: ti.types.ndarray(dtype=ti.u8, ndim=2),
              episode: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        ti.loop_config(serialize=self.fire.serial_envs)
         for v in range(self.fire.num_envs * self.fire.env_pad):
             if v % self.fire.env_pad == 0:
                 self.step_env(actions, obs, rewards, dones, episode, v // self.fire.env_pad)

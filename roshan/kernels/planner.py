@@ -130,6 +130,7 @@ class PlannerKernels(EpisodeKernels):
     def apply(self, actions: ti.types.ndarray(dtype=ti.i64, ndim=2)):
         """The planner's candidate indices become the drones' goals; the goal-dependent reward terms are
         evaluated now, on the decision itself (docs/model/agents.md §13.5)."""
+        ti.loop_config(serialize=self.fire.serial_envs)
         for e in range(self.fire.num_envs):
             self.assign_goals(actions, e)
 
@@ -138,6 +139,7 @@ class PlannerKernels(EpisodeKernels):
                  act_explore: ti.types.ndarray(dtype=ti.f32, ndim=3), obs_fly: ti.types.ndarray(dtype=ti.f32, ndim=4),
                  obs_explore: ti.types.ndarray(dtype=ti.f32, ndim=4), rewards: ti.types.ndarray(dtype=ti.f32, ndim=1),
                  dones: ti.types.ndarray(dtype=ti.u8, ndim=2), episode: ti.types.ndarray(dtype=ti.f32, ndim=2)):
+        ti.loop_config(serialize=self.fire.serial_envs)
         for v in range(self.fire.num_envs * self.fire.env_pad):
             e = v // self.fire.env_pad
             if v % self.fire.env_pad == 0 and self.finished[e] == 0:
@@ -147,6 +149,7 @@ class PlannerKernels(EpisodeKernels):
     def finish(self, obs: ti.types.ndarray(dtype=ti.f32, ndim=2), rewards: ti.types.ndarray(dtype=ti.f32, ndim=1),
                dones: ti.types.ndarray(dtype=ti.u8, ndim=2), episode: ti.types.ndarray(dtype=ti.f32, ndim=2)):
         """End of a planner step: reward and termination (planner controller), then a fresh observation."""
+        ti.loop_config(serialize=self.fire.serial_envs)
         for e in range(self.fire.num_envs):
             if ti.static(not self.greedy):
                 self.planner_outcome(rewards, dones, episode, e)
@@ -158,6 +161,7 @@ class PlannerKernels(EpisodeKernels):
     @ti.kernel
     def begin(self, rewards: ti.types.ndarray(dtype=ti.f32, ndim=1), dones: ti.types.ndarray(dtype=ti.u8, ndim=2)):
         """Clear the per-step outputs and counters before the low-level steps of a planner step."""
+        ti.loop_config(serialize=self.fire.serial_envs)
         for e in range(self.fire.num_envs):
             rewards[e] = 0.0
             dones[e, 0] = ti.u8(0)

@@ -247,3 +247,36 @@ def test_step_before_reset_is_an_error():
     env = FlyVectorEnv(1, Config(ignition=EMPTY, drones=DroneConfig(num_drones=1), wind=WindConfig(speed=0.0)))
     with pytest.raises(gym.error.ResetNeeded):
         env.step(np.zeros((1, 1, 2), np.float32))
+
+
+def test_one_env_flies_as_env_0_of_a_batch():
+    """E = 1 runs its kernels serially on the calling thread (roshan.kernels.fire.env_loop_serial), a batch
+    through Taichi's thread pool; env 0's trajectory, episode ends and autoresets included, is the same."""
+    def rollout(envs):
+        env = make_env(num_drones=2, envs=envs, fly=FlyConfig(policy="complex"),
+                       ignition=IgnitionConfig(fire_percentage=0.02), seed=4)
+        assert env.fire.serial_envs == (envs == 1)
+        g = torch.Generator().manual_seed(1)
+        out, ends = [], 0
+        for _ in range(400):
+            a = torch.zeros((envs, 2, 2))  # the other envs' actions play no part in env 0's trajectory
+            a[0] = (torch.rand((2, 2), generator=g) * 2 - 0.6).clamp(max=1.0)  # a drift: boundary exits
+            obs, r, term, trunc, info = env.step(a)
+            ends += int(term[0] | trunc[0])
+            out.append(torch.cat([obs["agent"][0].flatten(), r[0], info["final_obs"]["agent"][0].flatten(),
+                                  env._episode[0]]).clone())
+        return torch.stack(out), ends
+
+    one, ends = rollout(1)
+    assert ends >= 2, "the rollout should cross episode ends (autoresets)"
+    batched, _ = rollout(3)
+    assert torch.equal(one, batched)
+
+
+def test_actions_of_any_dtype_and_kind_are_taken_as_float32():
+    env = make_env(num_drones=2, envs=2, seed=2)
+    a64 = np.array([[[0.1, -0.2], [0.3, 0.4]], [[-0.5, 0.6], [0.7, -0.8]]])  # float64
+    ref = env.step(torch.tensor(a64, dtype=torch.float32))[0]["agent"].clone()
+    for given in (a64, a64.tolist(), torch.tensor(a64)):
+        env.reset(seed=2)
+        assert torch.equal(env.step(given)[0]["agent"], ref)
