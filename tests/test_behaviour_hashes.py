@@ -126,7 +126,7 @@ def planner_hash(controller: str) -> Digest:
     planner, the heuristic for greedy; 400 decisions of 5 low-level steps."""
     cfg = Config(ignition=IgnitionConfig(fire_percentage=0.02), drones=DroneConfig(num_drones=3))
     pc = PlannerConfig(fly_model=str(PINNED_FLIER), explorer_model=str(MODELS / "fly_simple"),
-                       num_explorers=4)
+                       num_explorers=4, greedy_home="original")  # the heuristic the pin was recorded with
     env = PlannerVectorEnv(3, cfg, pc, evaluation=True, controller=controller, seed=2)
     g = torch.Generator().manual_seed(3)
     d = Digest()

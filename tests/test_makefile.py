@@ -75,7 +75,7 @@ def test_the_demo_says_what_it_runs(venv):
     Path(stamp).touch()  # installed: -n then prints the demo's own command alone
     command = " ".join(make("-n", "demo", env=env).stdout.replace("\\\n", " ").split())
     assert "--episodes 8 --envs 8" in command and "--baseline greedy" in command
-    assert "--set planner.greedy_home=fixed" in command
+    assert "greedy_home=original" not in command  # the default heuristic is the fixed one
     readme = (ROOT / "README.md").read_text()
     (line,) = [ln for ln in readme.splitlines() if ln.startswith("make demo")]
     assert "8 fires" not in readme and "8 episodes" in line

@@ -111,10 +111,10 @@ class PlannerConfig(Section):
     eval_fires: str = choice("detected", ("true", "detected"), doc="candidates in evaluation")
     time_limit: str = choice("newest", ("newest", "thesis"))  # T_max formulas of docs/model/agents.md §5
     burnout: float = num(0.30, 0.0, 1.0, doc="burned-out fraction that fails the episode")
-    greedy_home: str = choice("original", ("original", "fixed"),
-                              doc="greedy heuristic: original = a drone whose fire is on the groundstation cell "
-                                  "re-takes it every step and never drops (docs/model/agents.md §10.2); "
-                                  "fixed = it drops")
+    greedy_home: str = choice("fixed", ("original", "fixed"),
+                              doc="greedy heuristic: fixed = a drone whose fire is on the groundstation cell drops "
+                                  "on it; original = it re-takes that fire every step and never drops, the "
+                                  "original's defect (docs/model/agents.md §10.2; the thesis configs keep it)")
     max_candidates: int = num(0, 0, 1 << 24,
                               doc="candidate list length K (groundstation included); 0 = every cell + 1")
     temperature: float = num(1.0, 0.0, 10.0, lo_open=True,

@@ -41,9 +41,10 @@ def test_planner_trains_resumes_and_evaluates_against_greedy_on_the_same_episode
     assert res.exit_code == 0, res.output
     assert "greedy" in res.output and "TTE" in res.output
     # the column and a note say which greedy heuristic played (issue 32, item 12)
-    assert "greedy (original)" in res.output and "planner.greedy_home = original" in res.output
+    # (the default since issue 32: the fixed heuristic; the thesis configs set original)
+    assert "greedy (fixed)" in res.output and "planner.greedy_home = fixed" in res.output
     payload = json.loads(out.read_text())
-    assert payload["greedy"].pop("greedy_home") == "original"
+    assert payload["greedy"].pop("greedy_home") == "fixed"
     assert set(payload) == {"policy", "greedy", "provenance"}
     assert payload.pop("provenance")["baseline"] == "greedy"
     for part in payload.values():
