@@ -94,6 +94,16 @@ class VectorEnvCore(gym.vector.VectorEnv):
                           "whose fires are not lit by hand (FireSim.ignite_cells) runs until its time limit and "
                           "never counts as a success", stacklevel=4)
 
+    @property
+    def physics_steps_per_step(self) -> int:
+        """Physics steps one :meth:`step` runs: the FlyAgent's ``frame_skips``, the planner's ``interval``."""
+        raise NotImplementedError
+
+    @property
+    def max_env_steps(self) -> int:
+        """The most :meth:`step` calls an episode may last (:attr:`t_max` counts physics steps)."""
+        return max(1, -(-self.t_max // self.physics_steps_per_step))
+
     def _buffer_bytes(self) -> int:
         """Bytes of the torch buffers the level allocates next to its simulators (the memory estimate counts
         them before anything is allocated)."""

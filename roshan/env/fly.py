@@ -60,6 +60,10 @@ class FlyVectorEnv(VectorEnvCore):
     def level_name(self) -> str:
         return f"FlyVectorEnv ({self.fly_config.policy} policy)"
 
+    @property
+    def physics_steps_per_step(self) -> int:
+        return self.fly_config.frame_skips
+
     def _take_simulators(self, land, seed):
         return take_fly_sims(land, self.config, self.fly_config, self.num_envs, seed, owner=self,
                              extra_bytes=self._buffer_bytes(), who=self.level_name())

@@ -85,6 +85,10 @@ class PlannerVectorEnv(VectorEnvCore):
     def level_name(self) -> str:
         return f"PlannerVectorEnv ({self.controller})"
 
+    @property
+    def physics_steps_per_step(self) -> int:
+        return self.interval  # low-level steps per decision, one physics step each
+
     def _take_simulators(self, land, seed):
         explore_frames = self.explorer_policy.frames if self.explorer_policy else 1
         sims, give_back = take_planner_sims(

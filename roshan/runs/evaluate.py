@@ -69,10 +69,7 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
                bar_format="{l_bar}{bar}| {n:" + (".1f" if fractional else ".0f") + "}/{total_fmt} episodes "
                           "[{elapsed}<{remaining}]")
     steps = torch.zeros(E, dtype=torch.long)  # steps of each env's running episode, for the bar
-    # env steps an episode may last: t_max counts physics steps, of which an env step runs frame_skips
-    # (FlyAgent) or interval (planner)
-    per_step = getattr(env, "interval", None) or env.fly_config.frame_skips
-    t_max = max(1, math.ceil(env.t_max / per_step))
+    t_max = env.max_env_steps
     flat = env.flat_drones  # FlyAgent policies see drones as a batch
     while int(done_count.min()) < quota:
         actions = act(flatten_drones(obs)).view(E, N, 2) if flat else act(obs)

@@ -259,8 +259,7 @@ class Trainer:
         env = self.eval_env
         frames = None
         if tc.eval_video_frames > 0:  # env 0's first episode, every k-th step
-            per_step = getattr(env, "interval", None) or env.fly_config.frame_skips
-            frames = EpisodeFrames(env, tc.eval_video_frames, math.ceil(env.t_max / per_step))
+            frames = EpisodeFrames(env, tc.eval_video_frames, env.max_env_steps)
         episodes = run_episodes(env, policy_fn(self.agent), tc.eval_episodes, seed=seed, progress_bar=False,
                                 on_step=frames.on_step if frames else None)
         summary = self.last_eval = summarize(episodes, reasons=env.failure_reasons, dt=self.cfg.fire.dt)

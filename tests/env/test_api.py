@@ -138,3 +138,13 @@ def test_parallel_agents_end_together(par_env):
         assert par_env.step({}) == ({}, {}, {}, {}, {})
     par_env.reset()
     assert par_env.agents == agents
+
+
+def test_an_env_says_how_many_steps_an_episode_may_last():
+    """t_max counts physics steps; one step of the FlyAgent env runs frame_skips of them, one planner step interval."""
+    import math
+
+    from roshan.config import FlyConfig
+    env = FlyVectorEnv(1, Config(), FlyConfig(frame_skips=3))
+    assert env.physics_steps_per_step == 3 and env.max_env_steps == math.ceil(env.t_max / 3)
+    env.close()

@@ -217,3 +217,8 @@ def test_greedy_fire_on_the_groundstation_cell_is_put_out_only_with_the_fix(home
     burning = [env.fire.state(e)[tuple(gs[e])] == BURNING for e in range(2)]
     assert burning == ([True, True] if home == "original" else [False, False])
     env.close()
+
+
+def test_a_planner_step_counts_interval_physics_steps():
+    env = make_env(interval=4)
+    assert env.physics_steps_per_step == 4 and env.max_env_steps == -(-env.t_max // 4)
