@@ -19,7 +19,6 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-import torch
 from taichi._lib import core as ti_core
 from taichi.lang import impl, kernel_impl
 from taichi.lang.enums import Layout
@@ -84,7 +83,7 @@ def _set_argument(context, index: tuple[int], annotation, value) -> bool:
         return False
     if annotation.dtype is not None and id(annotation.dtype) not in primitive_types.type_ids:
         return False  # vector or matrix elements: Taichi strips their dims from the shape
-    if isinstance(value, torch.Tensor):
+    if hasattr(value, "data_ptr") and hasattr(value, "is_contiguous"):  # a torch tensor (kernels/ imports no torch)
         if value.device.type != "cpu" or not value.is_contiguous() or value.requires_grad:
             return False
         pointer, nbytes = value.data_ptr(), value.element_size() * value.nelement()
