@@ -39,7 +39,7 @@ from roshan.study.storage import (
 from roshan.study.studies import _plain, _pruner, budget, fail_stale, load_study, prepare_study, tpe_sampler
 from roshan.study.trial import TrialDisplay, make_objective, objective_value
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 CONFIG = REPO / "configs" / "fly_simple.yaml"
 # A trial trains 2 PPO updates of 4 envs x 4 drones and evaluates 4 episodes of at most 100 steps.
 TINY = ["sim.envs=4", "ppo.horizon=256", "ppo.batch_size=128", "train.max_updates=2", "train.eval_episodes=4",
