@@ -79,8 +79,11 @@ demo: install
 		--json $(DEMO_DIR)/planner_vs_greedy.json --gif $(DEMO_DIR)/planner.gif --replace
 	@echo "demo: $(DEMO_DIR)/planner.gif, $(DEMO_DIR)/planner_vs_greedy.json, plots in $(DEMO_DIR) and $(DEMO_DIR)/greedy"
 
+# The suite in PYTEST_WORKERS processes (pytest-xdist), a test file to a worker: files share their module-scoped
+# Taichi runtime and env caches, and two workers keep both cores of the CI machine busy while one compiles.
+PYTEST_WORKERS ?= 2
 test: install
-	$(PYTHON) -m pytest -q
+	$(PYTHON) -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile
 
 lint: install
 	$(PYTHON) -m ruff check .
