@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
+import roshan.runs.auto_train
 import roshan.runs.evaluate
 import roshan.runs.train
 import roshan.tools.simulate
@@ -99,7 +100,10 @@ def test_eval_out_and_json_to_an_unwritable_folder_fail_before_any_episode(unwri
 
 
 def test_train_root_unwritable_fails_before_training(unwritable, monkeypatch):
-    monkeypatch.setattr(roshan.runs.train, "train", never)
+    # the CLI trains through roshan.runs.auto_train, which holds its own name for train (imported above, so the
+    # patch is undone for every later test; patching roshan.runs.train.train would leak into auto_train when this
+    # test is the first to import it)
+    monkeypatch.setattr(roshan.runs.auto_train, "train", never)
     line = one_line_error(invoke("train", ROOT / "configs/fly_simple.yaml", "--root", unwritable, "--quiet", *TINY),
                           unwritable)
     assert "run folders" in line
