@@ -6,13 +6,13 @@ Importing the package registers the Gymnasium id ``roshan/FlyAgent-v0``: ``gymna
 Taichi nor torch, nor gymnasium itself: where gymnasium is not imported yet, the id is registered the moment it
 is (so ``roshan --help`` and a fire-only ``roshan simulate`` never pay for gymnasium and numpy). Importing it also
 makes glibc keep freed memory for reuse (:mod:`roshan.allocator`: large torch temporaries were page-faulted in
-again on every step).
+again on every step), and patches Taichi's kernel definitions as Taichi loads (:mod:`roshan.taichi_patches`).
 """
 
 import importlib.util
 import sys
 
-from roshan import allocator
+from roshan import allocator, taichi_patches
 
 __version__ = "0.1.0"
 
@@ -31,13 +31,20 @@ def _register_envs() -> None:
                        vector_entry_point="roshan.env.fly:FlyVectorEnv")
 
 
-class _RegisterWhenGymnasiumLoads:
+class _AfterImport:
     """A one-shot import hook (a meta path finder and the loader it hands out; importlib.abc's base classes are
-    left out because importing them costs 30 ms): finds gymnasium with the other finders, runs it, then
-    registers our ids."""
+    left out because importing them costs 30 ms): finds module ``name`` with the other finders, runs it, then
+    calls ``then(module)``. Where the module is loaded already, ``then`` runs at once."""
+
+    def __init__(self, name: str, then):
+        self.name, self.then = name, then
+        if name in sys.modules:
+            then(sys.modules[name])
+        else:
+            sys.meta_path.insert(0, self)
 
     def find_spec(self, name, path, target=None):
-        if name != "gymnasium":
+        if name != self.name:
             return None
         sys.meta_path.remove(self)
         spec = importlib.util.find_spec(name)  # the finders after this one
@@ -50,13 +57,11 @@ class _RegisterWhenGymnasiumLoads:
         return self.loader.create_module(spec)
 
     def exec_module(self, module):
-        module.__loader__ = module.__spec__.loader = self.loader  # gymnasium keeps its own loader afterwards
+        module.__loader__ = module.__spec__.loader = self.loader  # the module keeps its own loader afterwards
         self.loader.exec_module(module)
-        _register_envs()
+        self.then(module)
 
 
-if "gymnasium" in sys.modules:
-    _register_envs()
-else:
-    sys.meta_path.insert(0, _RegisterWhenGymnasiumLoads())
+_AfterImport("gymnasium", lambda module: _register_envs())
+_AfterImport("taichi.lang.kernel_impl", taichi_patches.patch_kernel_impl)
 allocator.retain_freed_memory()

@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-import linecache
 import os
-import sys
 import warnings
 from collections.abc import Callable
 
 import taichi as ti
 from taichi.lang import kernel_impl
 from taichi.lang.ast.ast_transformer_utils import ASTTransformerContext
+
+from roshan import taichi_patches
 
 ARCHES = ("cpu", "cuda", "vulkan", "auto")
 # Taichi's default fast math lets LLVM use approximate reciprocals and square roots (RCP14/RSQRT14 and the like)
@@ -82,18 +82,12 @@ def init_taichi(arch: str = "cpu", threads: int | None = None, debug: bool = Fal
 
 
 # Building a kernel costs Taichi 1.7.4 (its last release) a Python AST transform at every start, which its
-# offline cache does not skip (the cache key is computed from the transformed IR). Two parts of it are pure waste,
-# and runtime patches them (tests/test_runtime.py checks both):
-# - it formats a caret diagram of the source (textwrap over the line) for every AST node, only to attach it as
-#   debug info: ~40 % of the transform. Outside debug mode each node gets "File, line, function" and its source
-#   line instead, which is what a compile error then shows;
-# - it looks up a ti.func's source again (inspect.getsourcefile / getsourcelines, which scan sys.modules) at every
-#   call site it inlines: ~900 lookups for a fire simulator. The source of a function object is looked up once;
-# - to tell whether a @ti.kernel is defined in a class body it reads the class frame's source line with
-#   inspect.getframeinfo, which scans sys.modules too: 0.3 s for our ~200 kernels at import. linecache reads the
-#   same line. roshan.kernels imports this module first, so the patch is in place before any kernel is defined.
+# offline cache does not skip (the cache key is computed from the transformed IR). Part of it is pure waste:
+# it formats a caret diagram of the source (textwrap over the line) for every AST node, only to attach it as
+# debug info: ~40 % of the transform. Outside debug mode each node gets "File, line, function" and its source
+# line instead, which is what a compile error then shows (tests/test_runtime.py checks it). The source lookups
+# it repeats are patched by roshan.taichi_patches (normally already, by roshan/__init__.py, as Taichi loaded).
 _FULL_POSITIONS = ASTTransformerContext.get_pos_info
-_sources: dict[tuple[str, object], object] = {}
 
 
 def _plain_position(ctx, node) -> str:
@@ -101,40 +95,11 @@ def _plain_position(ctx, node) -> str:
             f"{ctx.src[node.lineno - 1]}\n")
 
 
-def _once_per_function(lookup: Callable, name: str) -> Callable:
-    def cached(func):
-        key = (name, func)
-        if key not in _sources:
-            _sources[key] = lookup(func)
-        return _sources[key]
-
-    cached.uncached = lookup
-    return cached
-
-
 def _plain_source_positions(plain: bool) -> None:
     ASTTransformerContext.get_pos_info = _plain_position if plain else _FULL_POSITIONS
 
 
-def _inside_class(level_of_class_stackframe: int) -> bool:
-    """Taichi's ``kernel_impl._inside_class`` with the frame's line read by linecache (what getframeinfo returns
-    as its context line, without looking up the frame's module)."""
-    try:
-        frame = sys._getframe(level_of_class_stackframe)
-        line = linecache.getline(frame.f_code.co_filename, frame.f_lineno).strip()
-    except ValueError:  # no frame that deep
-        return False
-    return any(p.match(line) for p in kernel_impl._KERNEL_CLASS_STACKFRAME_STMT_RES)
-
-
-def _source_lookups_once() -> None:
-    if not hasattr(kernel_impl.getsourcelines, "uncached"):
-        kernel_impl.getsourcefile = _once_per_function(kernel_impl.getsourcefile, "file")
-        kernel_impl.getsourcelines = _once_per_function(kernel_impl.getsourcelines, "lines")
-        kernel_impl._inside_class = _inside_class
-
-
-_source_lookups_once()
+taichi_patches.patch_kernel_impl(kernel_impl)
 
 
 def cpu_cores() -> int:

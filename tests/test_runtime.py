@@ -113,8 +113,10 @@ def test_a_kernel_compile_error_still_names_its_file_and_line():
 def test_kernel_sources_are_looked_up_once_and_class_kernels_still_recognised():
     from taichi.lang import kernel_impl
 
+    from roshan import taichi_patches
+
     runtime.ensure_taichi()
-    assert kernel_impl._inside_class is runtime._inside_class
+    assert kernel_impl._inside_class is taichi_patches.inside_class
     assert hasattr(kernel_impl.getsourcelines, "uncached")
 
     @ti.data_oriented
@@ -130,3 +132,28 @@ def test_kernel_sources_are_looked_up_once_and_class_kernels_still_recognised():
     c.bump(2)
     c.bump(3)  # a class kernel taken for a free function would raise instead
     assert c.n[None] == 5
+
+
+def test_taichi_is_patched_before_it_defines_its_own_kernels():
+    """roshan's import hook patches kernel_impl as it loads, so even the ~90 kernels and functions that
+    ``import taichi`` defines itself never call inspect.getframeinfo (each call scans sys.modules)."""
+    code = (
+        "import inspect\n"
+        "calls = []\n"
+        "real = inspect.getframeinfo\n"
+        "inspect.getframeinfo = lambda *a, **k: calls.append(1) or real(*a, **k)\n"
+        "import roshan, taichi\n"
+        "from taichi.lang import kernel_impl\n"
+        "from roshan import taichi_patches\n"
+        "assert kernel_impl._inside_class is taichi_patches.inside_class\n"
+        "print(len(calls))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    assert out.stdout.split()[-1] == "0", out.stdout + out.stderr
+
+
+def test_taichi_imported_before_roshan_is_patched_as_roshan_loads():
+    code = ("import taichi\nfrom taichi.lang import kernel_impl\nimport roshan\n"
+            "print(kernel_impl._inside_class.__module__)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    assert out.stdout.split()[-1] == "roshan.taichi_patches", out.stdout + out.stderr

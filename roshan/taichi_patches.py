@@ -1,0 +1,59 @@
+"""Patches to Taichi 1.7.4 (its last release) that cut the Python work of defining and building kernels.
+
+This module imports nothing of Taichi: ``roshan/__init__.py`` applies :func:`patch_kernel_impl` the moment
+``taichi.lang.kernel_impl`` has run, before ``import taichi`` goes on to define Taichi's own ~90 kernels and
+functions (``taichi._funcs``, ``taichi._kernels``). Applied later, by :mod:`roshan.runtime`, it would leave
+those to the slow path: ~60 ms of every start on this machine kind.
+
+What is patched and why:
+- to tell whether a ``@ti.kernel`` or ``@ti.func`` is defined in a class body, Taichi reads the class frame's
+  source line with ``inspect.getframeinfo``, which scans ``sys.modules`` on every call. ``linecache`` reads the
+  same line;
+- it looks up a ti.func's source again (``inspect.getsourcefile`` / ``getsourcelines``, which scan
+  ``sys.modules`` too) at every call site it inlines: ~900 lookups for a fire simulator. The source of a
+  function object is looked up once.
+
+tests/test_runtime.py holds both, and that a fresh ``import roshan, taichi`` makes no ``getframeinfo`` call.
+"""
+
+from __future__ import annotations
+
+import linecache
+import sys
+from collections.abc import Callable
+
+_sources: dict[tuple[str, object], object] = {}
+_class_statements: list = []  # kernel_impl._KERNEL_CLASS_STACKFRAME_STMT_RES, once patched
+
+
+def patch_kernel_impl(kernel_impl) -> None:
+    """Install the patches in ``taichi.lang.kernel_impl`` (once; a second call does nothing)."""
+    if hasattr(kernel_impl.getsourcelines, "uncached"):
+        return
+    _class_statements[:] = kernel_impl._KERNEL_CLASS_STACKFRAME_STMT_RES
+    kernel_impl.getsourcefile = _once_per_function(kernel_impl.getsourcefile, "file")
+    kernel_impl.getsourcelines = _once_per_function(kernel_impl.getsourcelines, "lines")
+    kernel_impl._inside_class = inside_class
+
+
+def inside_class(level_of_class_stackframe: int) -> bool:
+    """Taichi's ``kernel_impl._inside_class`` with the frame's line read by linecache (what getframeinfo returns
+    as its context line, without looking up the frame's module). It replaces the original in place, so the
+    frame it looks at is the same."""
+    try:
+        frame = sys._getframe(level_of_class_stackframe)
+        line = linecache.getline(frame.f_code.co_filename, frame.f_lineno).strip()
+    except ValueError:  # no frame that deep
+        return False
+    return any(p.match(line) for p in _class_statements)
+
+
+def _once_per_function(lookup: Callable, name: str) -> Callable:
+    def cached(func):
+        key = (name, func)
+        if key not in _sources:
+            _sources[key] = lookup(func)
+        return _sources[key]
+
+    cached.uncached = lookup
+    return cached
