@@ -22,38 +22,39 @@ import linecache
 import sys
 from collections.abc import Callable
 
-_sources: dict[tuple[str, object], object] = {}
-_class_statements: list = []  # kernel_impl._KERNEL_CLASS_STACKFRAME_STMT_RES, once patched
-
 
 def patch_kernel_impl(kernel_impl) -> None:
     """Install the patches in ``taichi.lang.kernel_impl`` (once; a second call does nothing)."""
     if hasattr(kernel_impl.getsourcelines, "uncached"):
         return
-    _class_statements[:] = kernel_impl._KERNEL_CLASS_STACKFRAME_STMT_RES
-    kernel_impl.getsourcefile = _once_per_function(kernel_impl.getsourcefile, "file")
-    kernel_impl.getsourcelines = _once_per_function(kernel_impl.getsourcelines, "lines")
-    kernel_impl._inside_class = inside_class
+    kernel_impl.getsourcefile = _once_per_function(kernel_impl.getsourcefile)
+    kernel_impl.getsourcelines = _once_per_function(kernel_impl.getsourcelines)
+    kernel_impl._inside_class = _class_body_test(tuple(kernel_impl._KERNEL_CLASS_STACKFRAME_STMT_RES))
 
 
-def inside_class(level_of_class_stackframe: int) -> bool:
+def _class_body_test(statements: tuple) -> Callable[[int], bool]:
     """Taichi's ``kernel_impl._inside_class`` with the frame's line read by linecache (what getframeinfo returns
     as its context line, without looking up the frame's module). It replaces the original in place, so the
-    frame it looks at is the same."""
-    try:
-        frame = sys._getframe(level_of_class_stackframe)
-        line = linecache.getline(frame.f_code.co_filename, frame.f_lineno).strip()
-    except ValueError:  # no frame that deep
-        return False
-    return any(p.match(line) for p in _class_statements)
+    frame it looks at is the same; ``statements`` are Taichi's patterns of a class-body line."""
+
+    def inside_class(level_of_class_stackframe: int) -> bool:
+        try:
+            frame = sys._getframe(level_of_class_stackframe)
+            line = linecache.getline(frame.f_code.co_filename, frame.f_lineno).strip()
+        except ValueError:  # no frame that deep
+            return False
+        return any(p.match(line) for p in statements)
+
+    return inside_class
 
 
-def _once_per_function(lookup: Callable, name: str) -> Callable:
+def _once_per_function(lookup: Callable) -> Callable:
+    found: dict = {}  # function object -> what lookup returned for it
+
     def cached(func):
-        key = (name, func)
-        if key not in _sources:
-            _sources[key] = lookup(func)
-        return _sources[key]
+        if func not in found:
+            found[func] = lookup(func)
+        return found[func]
 
     cached.uncached = lookup
     return cached
