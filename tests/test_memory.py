@@ -19,7 +19,8 @@ from roshan.config import Config, ConfigError, DroneConfig, FireConfig, MapConfi
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.planner import PlannerVectorEnv
 from roshan.kernels import pool
-from roshan.kernels.fire import FireSim, fire_sizes
+from roshan.kernels.fire import FireSim
+from roshan.kernels.fire_layout import fire_sizes
 from roshan.maps import load_map, uniform_map
 
 MODEL = str(Path(__file__).resolve().parents[1] / "models" / "fly_simple")

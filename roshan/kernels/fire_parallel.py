@@ -61,7 +61,7 @@ F_OUT, F_CONV, F_RAD = range(3)
 
 def scratch_bytes(conv_capacity: int, rad_capacity: int, list_capacity: int) -> int:
     """The scratch fields' bytes of a :class:`ChunkedStep` for these pool and list sizes (known before it is
-    built: the memory estimate of :func:`roshan.kernels.fire.fire_sizes` counts them)."""
+    built: the memory estimate of :func:`roshan.kernels.fire_layout.fire_sizes` counts them)."""
     big = (pt.CONV_FIELDS * conv_capacity + pt.RAD_FIELDS * rad_capacity
            + max(conv_capacity + rad_capacity, list_capacity) + 2 * list_capacity)
     return 4 * (big + 4 * 3 + 4 * MAX_CHUNKS * (5 + 3) + 2)

@@ -26,7 +26,8 @@ from roshan.config import CONTROLLERS, Config, FlyConfig, PlannerConfig
 from roshan.kernels.drones import DroneSim
 from roshan.kernels.episode import EpisodeKernels
 from roshan.kernels.explore import ExploreMaps, meander_length
-from roshan.kernels.fire import FireSim, FireSizes, choose_parallel, fire_sizes
+from roshan.kernels.fire import FireSim
+from roshan.kernels.fire_layout import FireSizes, choose_parallel, fire_sizes
 from roshan.kernels.fly import FlyKernels, time_limit
 from roshan.kernels.planner import PlannerKernels, planner_time_limit
 from roshan.kernels.render import EnvZeroFrames

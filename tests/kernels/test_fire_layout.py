@@ -4,14 +4,9 @@ import numpy as np
 import pytest
 
 from roshan.config import FireConfig, IgnitionConfig
-from roshan.kernels.fire import (
-    BLOCK_CELLS,
-    FireSim,
-    block_grid,
-    choose_layout,
-    default_block_capacity,
-    dense_bytes_per_env,
-)
+from roshan.kernels.fire import FireSim
+from roshan.kernels.fire_layout import block_grid, choose_layout, default_block_capacity, dense_bytes_per_env
+from roshan.kernels.fire_records import BLOCK_CELLS
 from roshan.maps import BURNING, load_map
 from tests.conftest import assert_same_fire, water_and_a_reset
 
@@ -103,12 +98,12 @@ def test_grouped_timers_read_and_write_as_one_vector_field_with_each_group_in_it
     import taichi as ti
     from taichi.lang.field import ScalarField
 
-    from roshan.kernels.fire import _grouped_vector_field
+    from roshan.kernels.fire_layout import grouped_vector_field
     from roshan.runtime import ensure_taichi
 
     ensure_taichi()
     groups = ((1, 2), (0, 3), (4,))
-    grouped = _grouped_vector_field(ti.f64, (2, 5), groups)
+    grouped = grouped_vector_field(ti.f64, (2, 5), groups)
 
     @ti.kernel
     def fill():
@@ -124,4 +119,4 @@ def test_grouped_timers_read_and_write_as_one_vector_field_with_each_group_in_it
     assert parents[1] == parents[2] and parents[0] == parents[3]  # a group shares one array of records
     assert len({parents[1], parents[0], parents[4]}) == 3
     with pytest.raises(AssertionError):
-        _grouped_vector_field(ti.f64, (2, 5), ((0, 1), (1, 2)))  # a component twice, one missing
+        grouped_vector_field(ti.f64, (2, 5), ((0, 1), (1, 2)))  # a component twice, one missing

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from roshan.config import FireConfig, IgnitionConfig
-from roshan.kernels.fire import CHUNKS_MIN_FIRES, FireSim, choose_parallel
+from roshan.kernels.fire import FireSim
+from roshan.kernels.fire_layout import CHUNKS_MIN_FIRES, choose_parallel
 from roshan.kernels.fire_parallel import ChunkedStep
 from roshan.maps import load_map
 from tests.conftest import assert_same_fire, water_and_a_reset
