@@ -5,7 +5,7 @@ and its particle pools) is done serially inside it. That keeps a step's cost pro
 map, makes the order of every update fixed (so a seed fixes the trajectory whatever the thread count) and costs
 one kernel launch per call however many envs or steps it advances.
 
-Cell records live in one of two layouts behind the same accessors (``_rec`` / ``_touch``): dense, a record per
+Cell records live in one of two layouts behind the same accessors (``record_of`` / ``_touch``): dense, a record per
 cell, or sparse, a per-env pool of 8 x 8 blocks that a block joins when fire, particles, water or the generator
 first write to one of its cells and leaves at the reset, so memory and reset cost follow the fire's footprint.
 The pool is plain fields (not Taichi ``pointer`` SNodes: those keep their memory when a field tree is destroyed,
@@ -428,16 +428,6 @@ class FireSim:
         light_initial_fires(self, e)
         self.counts[e, N_IGNITED_INIT] = self.counts[e, N_BURNING]
 
-    @ti.func
-    def step_env(self, e):
-        """One fire update of env e (for kernels that fuse the fire with other work)."""
-        self._step_env(e)
-
-    @ti.func
-    def drop_water(self, e, c) -> ti.i32:
-        """Flood cell c of env e (docs/model/fire.md §8); 1 if it was burning."""
-        return self._drop_water(e, c)
-
     # Read access for the kernels of other modules (drones, tasks, episodes, rendering, the initial-fire
     # generator): they ask by name, so the record layouts (C_*, N_*, dense or sparse) stay this module's business.
 
@@ -450,7 +440,7 @@ class FireSim:
         """Cell c's class id, or BURNING / BURNED / FLOODED."""
         state = 0
         if ti.static(self.sparse):
-            r = self._rec(e, c)
+            r = self.record_of(e, c)
             state = self.land[c]
             if r >= 0:
                 state = self.cells[e, r][C_STATE]
@@ -461,7 +451,7 @@ class FireSim:
     @ti.func
     def was_extinguished(self, e, c) -> ti.i32:
         """1 if water put cell c out while it was burning, earlier in this episode."""
-        r = self._rec(e, c)
+        r = self.record_of(e, c)
         out = 0
         if r >= 0:
             out = ti.cast((self.cells[e, r][C_FLAGS] & FLAG_EXTINGUISHED) != 0, ti.i32)
@@ -475,7 +465,7 @@ class FireSim:
     @ti.func
     def mark_of(self, e, c) -> ti.i32:
         """The generator's scratch mark of cell c (0 since the reset)."""
-        r = self._rec(e, c)
+        r = self.record_of(e, c)
         m = 0
         if r >= 0:
             m = self.mark[e, r]
@@ -551,7 +541,7 @@ class FireSim:
     # ------------------------------------------------------------------------------------------ cell records
 
     @ti.func
-    def _rec(self, e, c) -> ti.i32:
+    def record_of(self, e, c) -> ti.i32:
         """Record index of cell c in env e; -1 where the sparse layout holds none (the cell is as reset)."""
         r = c
         if ti.static(self.sparse):
@@ -658,7 +648,7 @@ class FireSim:
         for e, c in ti.ndrange(self.num_envs, self.num_cells):
             rec = ti.Vector([self.land[c], 0, -1, 0], ti.i32)
             tim = ti.Vector([0.0, 0.0, 0.0, 0.0, 0.0], ti.f64)
-            r = self._rec(e, c)
+            r = self.record_of(e, c)
             if r >= 0:
                 rec = self.cells[e, r]
                 tim = self.timers[e, r]
@@ -684,7 +674,7 @@ class FireSim:
             if v % self.env_pad == 0:
                 e = v // self.env_pad
                 for _ in range(n_steps):
-                    self._step_env(e)
+                    self.step_env(e)
                 for k in ti.static(range(N_COUNTS)):  # the read a caller makes next, in the same launch
                     counters[e, k] = self.counts[e, k]
 
@@ -696,19 +686,23 @@ class FireSim:
                 counters[e, k] = self.counts[e, k]
 
     @ti.func
-    def _step_env(self, e):
-        """One fire update in the reference's order (docs/model/fire.md §4); steps 2 and 4 share one pass."""
+    def step_env(self, e):
+        """One fire update of env e in the reference's order (docs/model/fire.md §4); steps 2 and 4 share one pass.
+        Public for kernels that fuse the fire with other work."""
         t = self.counts[e, N_STEP] + 1
         self.counts[e, N_STEP] = t
         step_key = rng.mix32(self.env_key[e] ^ (ti.cast(t, ti.u32) * ti.u32(0x9E3779B9)))
         self._move_convection(e, t, step_key)
         self._move_radiation(e, t, step_key)
-        self._drain_floods(e)
+        self.drain_floods(e)
         self._expose_and_ignite(e, t)
         self._burn(e, step_key)
 
+    # cell_of, visit, drain_floods, light and burn_tick (and record_of) are public: the chunked update
+    # (fire_parallel.py) runs them on its chunks, so that both paths share one copy of the physics.
+
     @ti.func
-    def _cell_of(self, x1, x2):
+    def cell_of(self, x1, x2):
         """Flat index of the cell holding a point in metres, or -1 outside the grid."""
         c = -1
         if 0.0 <= x1 < self.extent[0] and 0.0 <= x2 < self.extent[1]:
@@ -718,7 +712,7 @@ class FireSim:
         return c
 
     @ti.func
-    def _visit(self, e, c, t):
+    def visit(self, e, c, t):
         """A live particle sits in cell c during update t: stamp it and add it to the exposed list once."""
         r = self._touch(e, c)
         if r >= 0:
@@ -740,11 +734,11 @@ class FireSim:
             p = pt.advect_convection(self.conv[e, i], wind, self.normals[rng.low16(h)],
                                      self.normals[rng.high16(h)], self.conv_decay, self.conv_f1dt,
                                      self.conv_f2, self.conv_fldt)
-            c = self._cell_of(p[pt.P_X1], p[pt.P_X2])
+            c = self.cell_of(p[pt.P_X1], p[pt.P_X2])
             if c >= 0 and p[pt.P_Y] >= self.conv_y_lim:
                 self.conv[e, w] = p
                 w += 1
-                self._visit(e, c, t)
+                self.visit(e, c, t)
         self.counts[e, N_CONV] = w
 
     @ti.func
@@ -757,19 +751,19 @@ class FireSim:
             p = pt.advect_radiation(p, self.unit[rng.low16(h)], self.normals[rng.high16(h)],
                                     sf[0] * self.dt, sf[1] * self.sqrt_dt)
             x = pt.radiation_position(p)
-            c = self._cell_of(x[0], x[1])
+            c = self.cell_of(x[0], x[1])
             if c >= 0 and p[pt.R_Y] >= self.rad_y_lim:
                 self.rad[e, w] = p
                 w += 1
-                self._visit(e, c, t)
+                self.visit(e, c, t)
         self.counts[e, N_RAD] = w
 
     @ti.func
-    def _drain_floods(self, e):
+    def drain_floods(self, e):
         w = 0
         for k in range(self.counts[e, N_FLOODED]):
             c = self.flooded[e, k]
-            r = self._rec(e, c)  # a listed cell has a record
+            r = self.record_of(e, c)  # a listed cell has a record
             f = self.timers[e, r][T_FLOOD] + ti.f64(self.dt)
             if f >= self.flood_duration:  # the flood ends: back to the original class, or burned
                 self.timers[e, r][T_FLOOD] = self.flood_duration
@@ -789,7 +783,7 @@ class FireSim:
         w = 0
         for k in range(self.counts[e, N_EXPOSED]):
             c = self.exposed[e, k]
-            r = self._rec(e, c)
+            r = self.record_of(e, c)
             flags = self.cells[e, r][C_FLAGS]
             if self.cells[e, r][C_VISIT] != t:
                 self.cells[e, r][C_FLAGS] = flags & ~FLAG_EXPOSED
@@ -806,13 +800,13 @@ class FireSim:
 
     @ti.func
     def _ignite(self, e, r, c):
-        self.counts[e, N_LIT] += self._light(e, r, c)
+        self.counts[e, N_LIT] += self.light(e, r, c)
         n = self.counts[e, N_BURNING]
         self.burning[e, n] = c
         self.counts[e, N_BURNING] = n + 1
 
     @ti.func
-    def _light(self, e, r, c) -> ti.i32:
+    def light(self, e, r, c) -> ti.i32:
         """The record half of an ignition (the list half is the caller's); 1 if the cell is lit for the first
         time this episode."""
         self._draw_durations(e, r, c)
@@ -828,7 +822,7 @@ class FireSim:
         w = 0
         for k in range(self.counts[e, N_BURNING]):
             c = self.burning[e, k]
-            emits = self._burn_tick(e, self._rec(e, c))
+            emits = self.burn_tick(e, self.record_of(e, c))
             if (emits & EMIT_CONV) != 0:
                 self._emit_convection(e, c, step_key)
             if (emits & EMIT_RAD) != 0:
@@ -841,7 +835,7 @@ class FireSim:
         self.counts[e, N_BURNING] = w
 
     @ti.func
-    def _burn_tick(self, e, r) -> ti.i32:
+    def burn_tick(self, e, r) -> ti.i32:
         """One update of a burning cell's record: its timers, and BURNED once its time is up. Returns what the
         caller does with the cell, as bits: EMIT_CONV / EMIT_RAD (emit that particle) and BURNED_OUT."""
         before = self.timers[e, r][T_BURN_TIME]
@@ -925,12 +919,12 @@ class FireSim:
                 c = requests[e, m]
                 extinguished[e, m] = 0
                 if 0 <= c < self.num_cells:
-                    extinguished[e, m] = self._drop_water(e, c)
+                    extinguished[e, m] = self.drop_water(e, c)
 
     @ti.func
-    def _drop_water(self, e, c) -> ti.i32:
-        """docs/model/fire.md §8: flood a cell; returns 1 if it was burning (extinguished). A drop the sparse pool has
-        no room for is counted in N_DROP_BLOCK and changes nothing."""
+    def drop_water(self, e, c) -> ti.i32:
+        """docs/model/fire.md §8: flood cell c of env e; returns 1 if it was burning (extinguished). A drop the sparse
+        pool has no room for is counted in N_DROP_BLOCK and changes nothing."""
         r = self._touch(e, c)
         was_burning = 0
         if r >= 0:
@@ -958,7 +952,7 @@ class FireSim:
         w = 0
         for i in range(self.counts[e, N_CONV]):
             p = self.conv[e, i]
-            if self._cell_of(p[pt.P_X1], p[pt.P_X2]) != c:
+            if self.cell_of(p[pt.P_X1], p[pt.P_X2]) != c:
                 self.conv[e, w] = p
                 w += 1
         self.counts[e, N_CONV] = w
@@ -966,7 +960,7 @@ class FireSim:
         for i in range(self.counts[e, N_RAD]):
             p = self.rad[e, i]
             x = pt.radiation_position(p)
-            if self._cell_of(x[0], x[1]) != c:
+            if self.cell_of(x[0], x[1]) != c:
                 self.rad[e, w] = p
                 w += 1
         self.counts[e, N_RAD] = w
@@ -990,7 +984,7 @@ class FireSim:
         for e in range(self.num_envs):
             for c in range(self.num_cells):
                 if mask[e, c] != 0:
-                    self._visit(e, c, self.counts[e, N_STEP] + 1)
+                    self.visit(e, c, self.counts[e, N_STEP] + 1)
 
 
 @ti.func

@@ -1,6 +1,6 @@
 """One env's fire update spread over CPU threads, with the env-serial update's trajectory bit for bit.
 
-The serial update (``FireSim._step_env``) walks four lists in order: convection particles, radiation particles,
+The serial update (``FireSim.step_env``) walks four lists in order: convection particles, radiation particles,
 exposed cells, burning cells. Here each list is cut into chunks. A parallel pass does each chunk's items in order
 and writes what it keeps into the chunk's own stretch of a scratch buffer; a serial pass adds up the chunks'
 counts (their running sums are where each chunk's output goes) and does, in list order, the little that depends
@@ -12,7 +12,7 @@ What depends on order, and where it is done:
 
 - A particle's visit to a cell without a record yet (the sparse layout hands out blocks in visit order) or to an
   ignitable cell not yet exposed (the exposed list grows in visit order): its chunk queues it and the serial
-  pass replays the queue in order through the serial path's own ``_visit``. Any other visit only stamps the
+  pass replays the queue in order through the serial path's own ``visit``. Any other visit only stamps the
   cell with the update's number, which any order does alike.
 - New fires join the burning list in exposed-list order: queued per chunk, appended serially.
 - Emissions take the next pool slots in burning-list order, or are dropped once the pool is full: each chunk
@@ -118,7 +118,7 @@ class ChunkedStep:
         ti.loop_config(serialize=True)  # a serial task: no thread-pool dispatch (~30 us here)
         for _ in range(1):  # serial: particle counts, the queued visits in order, flood drains
             self._replay_visits(e)
-            self.sim._drain_floods(e)
+            self.sim.drain_floods(e)
             self._plan(EXPOSED, self.sim.counts[e, N_EXPOSED])
         for v in range((self.plan[CONV, PLAN_COUNT] + self.plan[RAD, PLAN_COUNT]
                         + self.plan[EXPOSED, PLAN_COUNT]) * TASK):
@@ -179,7 +179,7 @@ class ChunkedStep:
     def _stamp(self, e, c, t) -> ti.i32:
         """A visit that needs no order: the cell has a record and is not an ignitable cell waiting to be
         exposed. Stamps it and returns 1; otherwise returns 0 (the visit is queued for the serial replay)."""
-        r = self.sim._rec(e, c)
+        r = self.sim.record_of(e, c)
         done = 0
         if r >= 0:
             self.sim.cells[e, r][C_VISIT] = t
@@ -200,7 +200,7 @@ class ChunkedStep:
             p = pt.advect_convection(self.sim.conv[e, i], wind, self.sim.normals[rng.low16(h)],
                                      self.sim.normals[rng.high16(h)], self.sim.conv_decay, self.sim.conv_f1dt,
                                      self.sim.conv_f2, self.sim.conv_fldt)
-            c = self.sim._cell_of(p[pt.P_X1], p[pt.P_X2])
+            c = self.sim.cell_of(p[pt.P_X1], p[pt.P_X2])
             if c >= 0 and p[pt.P_Y] >= self.sim.conv_y_lim:
                 self.conv[lo + w] = p
                 w += 1
@@ -224,7 +224,7 @@ class ChunkedStep:
             p = pt.advect_radiation(p, self.sim.unit[rng.low16(h)], self.sim.normals[rng.high16(h)],
                                     sf[0] * self.sim.dt, sf[1] * self.sim.sqrt_dt)
             x = pt.radiation_position(p)
-            c = self.sim._cell_of(x[0], x[1])
+            c = self.sim.cell_of(x[0], x[1])
             if c >= 0 and p[pt.R_Y] >= self.sim.rad_y_lim:
                 self.rad[lo + w] = p
                 w += 1
@@ -242,12 +242,12 @@ class ChunkedStep:
         for q in range(self.plan[CONV, PLAN_COUNT]):
             lo = q * self.plan[CONV, PLAN_SIZE]
             for k in range(self.chunk[CONV * MAX_CHUNKS + q, K_QUEUED]):
-                self.sim._visit(e, self.queue[lo + k], t)
+                self.sim.visit(e, self.queue[lo + k], t)
         base = self.plan[CONV, PLAN_N]
         for q in range(self.plan[RAD, PLAN_COUNT]):
             lo = base + q * self.plan[RAD, PLAN_SIZE]
             for k in range(self.chunk[RAD * MAX_CHUNKS + q, K_QUEUED]):
-                self.sim._visit(e, self.queue[lo + k], t)
+                self.sim.visit(e, self.queue[lo + k], t)
 
     @ti.func
     def _place_kept(self, e, lst: ti.template(), q, scratch: ti.template(), dest: ti.template()):
@@ -270,7 +270,7 @@ class ChunkedStep:
         new = 0
         for k in range(lo, hi):
             c = self.sim.exposed[e, k]
-            r = self.sim._rec(e, c)
+            r = self.sim.record_of(e, c)
             flags = self.sim.cells[e, r][C_FLAGS]
             if self.sim.cells[e, r][C_VISIT] != t:
                 self.sim.cells[e, r][C_FLAGS] = flags & ~FLAG_EXPOSED
@@ -279,7 +279,7 @@ class ChunkedStep:
                 self.sim.timers[e, r][T_EXPOSURE] = exposure
                 if exposure >= self.sim.timers[e, r][T_IGN]:
                     self.sim.cells[e, r][C_FLAGS] = flags & ~FLAG_EXPOSED
-                    lit += self.sim._light(e, r, c)
+                    lit += self.sim.light(e, r, c)
                     self.fresh[lo + new] = c
                     new += 1
                 else:
@@ -314,7 +314,7 @@ class ChunkedStep:
         burned = 0
         for k in range(lo, hi):
             c = self.sim.burning[e, k]
-            emits = self.sim._burn_tick(e, self.sim._rec(e, c))
+            emits = self.sim.burn_tick(e, self.sim.record_of(e, c))
             if (emits & (EMIT_CONV | EMIT_RAD)) != 0:
                 self.queue[lo + queued] = (c << 2) | (emits & (EMIT_CONV | EMIT_RAD))
                 queued += 1

@@ -38,5 +38,5 @@ BLOCK_SIDE = 8  # sparse layout: cells per block side
 BLOCK_SHIFT = 6  # log2(cells per block)
 BLOCK_CELLS = 1 << BLOCK_SHIFT
 
-# What one update does with a burning cell (FireSim._burn_tick), as bits.
+# What one update does with a burning cell (FireSim.burn_tick), as bits.
 EMIT_CONV, EMIT_RAD, BURNED_OUT = 1, 2, 4
