@@ -61,8 +61,6 @@ from roshan.kernels.fire_records import (
     N_CONV,
     N_COUNTS,
     N_DROP_BLOCK,
-    N_DROP_CONV,
-    N_DROP_RAD,
     N_EXPOSED,
     N_EXTINGUISHED,
     N_FLOODED,
@@ -692,8 +690,8 @@ class FireSim:
         t = self.counts[e, N_STEP] + 1
         self.counts[e, N_STEP] = t
         step_key = rng.mix32(self.env_key[e] ^ (ti.cast(t, ti.u32) * ti.u32(0x9E3779B9)))
-        self._move_convection(e, t, step_key)
-        self._move_radiation(e, t, step_key)
+        pt.move_convection(self, e, t, step_key)
+        pt.move_radiation(self, e, t, step_key)
         self.drain_floods(e)
         self._expose_and_ignite(e, t)
         self._burn(e, step_key)
@@ -724,39 +722,6 @@ class FireSim:
                 n = self.counts[e, N_EXPOSED]
                 self.exposed[e, n] = c
                 self.counts[e, N_EXPOSED] = n + 1
-
-    @ti.func
-    def _move_convection(self, e, t, step_key):
-        w = 0
-        wind = self.wind[e]
-        for i in range(self.counts[e, N_CONV]):
-            h = rng.key(step_key, i, rng.DOMAIN_CONVECTION)
-            p = pt.advect_convection(self.conv[e, i], wind, self.normals[rng.low16(h)],
-                                     self.normals[rng.high16(h)], self.conv_decay, self.conv_f1dt,
-                                     self.conv_f2, self.conv_fldt)
-            c = self.cell_of(p[pt.P_X1], p[pt.P_X2])
-            if c >= 0 and p[pt.P_Y] >= self.conv_y_lim:
-                self.conv[e, w] = p
-                w += 1
-                self.visit(e, c, t)
-        self.counts[e, N_CONV] = w
-
-    @ti.func
-    def _move_radiation(self, e, t, step_key):
-        w = 0
-        for i in range(self.counts[e, N_RAD]):
-            h = rng.key(step_key, i, rng.DOMAIN_RADIATION)
-            p = self.rad[e, i]
-            sf = self.cls_sf[ti.cast(p[pt.R_CLS], ti.i32)]
-            p = pt.advect_radiation(p, self.unit[rng.low16(h)], self.normals[rng.high16(h)],
-                                    sf[0] * self.dt, sf[1] * self.sqrt_dt)
-            x = pt.radiation_position(p)
-            c = self.cell_of(x[0], x[1])
-            if c >= 0 and p[pt.R_Y] >= self.rad_y_lim:
-                self.rad[e, w] = p
-                w += 1
-                self.visit(e, c, t)
-        self.counts[e, N_RAD] = w
 
     @ti.func
     def drain_floods(self, e):
@@ -824,9 +789,9 @@ class FireSim:
             c = self.burning[e, k]
             emits = self.burn_tick(e, self.record_of(e, c))
             if (emits & EMIT_CONV) != 0:
-                self._emit_convection(e, c, step_key)
+                pt.emit_convection(self, e, c, step_key)
             if (emits & EMIT_RAD) != 0:
-                self._emit_radiation(e, c, step_key)
+                pt.emit_radiation(self, e, c, step_key)
             if (emits & BURNED_OUT) != 0:
                 self.counts[e, N_BURNED] += 1
             else:
@@ -860,54 +825,6 @@ class FireSim:
             self.cells[e, r][C_FLAGS] |= FLAG_BURNED_DOWN
             emits |= BURNED_OUT
         return emits
-
-    @ti.func
-    def _emit_convection(self, e, c, step_key):
-        n = self.counts[e, N_CONV]
-        if n < self.conv_capacity:
-            self.conv[e, n] = self.convection_from(c, step_key)
-            self.counts[e, N_CONV] = n + 1
-        else:
-            self.counts[e, N_DROP_CONV] += 1
-
-    @ti.func
-    def _emit_radiation(self, e, c, step_key):
-        n = self.counts[e, N_RAD]
-        if n < self.rad_capacity:
-            self.rad[e, n] = self.radiation_from(c, step_key)
-            self.counts[e, N_RAD] = n + 1
-        else:
-            self.counts[e, N_DROP_RAD] += 1
-
-    @ti.func
-    def convection_from(self, c, step_key):
-        """A new convection particle of burning cell c (its draws are keyed by the cell, not its pool slot)."""
-        h = rng.key(step_key, c, rng.DOMAIN_EMISSION)
-        i = c // self.cols
-        j = c % self.cols
-        # The reference's particle constructor takes whole metres: the emission point is truncated.
-        x1 = ti.floor((i + rng.uniform(h)) * self.cell_size)
-        x2 = ti.floor((j + rng.uniform(rng.mix32(h))) * self.cell_size)
-        return ti.Vector([x1, x2, 0.0, 0.0, self.conv_y_st], ti.f32)
-
-    @ti.func
-    def radiation_from(self, c, step_key):
-        """A new radiation particle of burning cell c (keyed by the cell, as convection_from)."""
-        cls = self.land[c]  # the mother class, never the burning state
-        h = rng.key(step_key, c, rng.DOMAIN_EMISSION + 16)
-        h2 = rng.mix32(h)
-        sf = self.cls_sf[cls]
-        lr = self.cls_lr[cls]
-        sf_sample = ti.abs(sf[0] + sf[1] * self.normals[rng.low16(h)])
-        length = lr[0] + (lr[1] - lr[0]) * rng.uniform(h2)
-        tau = 2703.0
-        if sf_sample > 0.00925:
-            tau = length / sf_sample
-        i = c // self.cols
-        j = c % self.cols
-        o1 = (i + rng.uniform(rng.mix32(h2))) * self.cell_size
-        o2 = (j + rng.uniform(rng.mix32(h2 + ti.u32(1)))) * self.cell_size
-        return pt.new_radiation(o1, o2, self.rad_y_st, 1.0 - self.dt / tau, cls)
 
     # ------------------------------------------------------------------------------------------ water
 
@@ -944,26 +861,8 @@ class FireSim:
                 self.counts[e, N_FLOODED] = n + 1
             self.cells[e, r][C_STATE] = FLOODED
             self.timers[e, r][T_FLOOD] = 0.0
-            self._delete_particles_in(e, c)
+            pt.delete_particles_in(self, e, c)
         return was_burning
-
-    @ti.func
-    def _delete_particles_in(self, e, c):
-        w = 0
-        for i in range(self.counts[e, N_CONV]):
-            p = self.conv[e, i]
-            if self.cell_of(p[pt.P_X1], p[pt.P_X2]) != c:
-                self.conv[e, w] = p
-                w += 1
-        self.counts[e, N_CONV] = w
-        w = 0
-        for i in range(self.counts[e, N_RAD]):
-            p = self.rad[e, i]
-            x = pt.radiation_position(p)
-            if self.cell_of(x[0], x[1]) != c:
-                self.rad[e, w] = p
-                w += 1
-        self.counts[e, N_RAD] = w
 
     # ------------------------------------------------------------------------------------------ test hooks
 

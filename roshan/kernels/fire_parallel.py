@@ -364,9 +364,9 @@ class ChunkedStep:
             c = item >> 2
             if (item & EMIT_CONV) != 0:
                 if conv < self.sim.conv_capacity:
-                    self.sim.conv[e, conv] = self.sim.convection_from(c, step_key)
+                    self.sim.conv[e, conv] = pt.convection_from(self.sim, c, step_key)
                 conv += 1
             if (item & EMIT_RAD) != 0:
                 if rad < self.sim.rad_capacity:
-                    self.sim.rad[e, rad] = self.sim.radiation_from(c, step_key)
+                    self.sim.rad[e, rad] = pt.radiation_from(self.sim, c, step_key)
                 rad += 1
