@@ -5,13 +5,14 @@ and its particle pools) is done serially inside it. That keeps a step's cost pro
 map, makes the order of every update fixed (so a seed fixes the trajectory whatever the thread count) and costs
 one kernel launch per call however many envs or steps it advances.
 
-Cell records live in one of two layouts behind the same accessors (``record_of`` / ``_touch``): dense, a record per
-cell, or sparse, a per-env pool of 8 x 8 blocks that a block joins when fire, particles, water or the generator
-first write to one of its cells and leaves at the reset, so memory and reset cost follow the fire's footprint.
-The pool is plain fields (not Taichi ``pointer`` SNodes: those keep their memory when a field tree is destroyed,
-Taichi issue 5777, and do not exist on Vulkan), handed out in the fixed order of the env's serial updates, so
-a trajectory is the same in either layout. A full pool is counted (``dropped_blocks``), never silent.
-Which layout, and every capacity, is decided before anything is allocated (:mod:`roshan.kernels.fire_layout`).
+Cell records live in one of two layouts behind the same accessors (``record_of`` / ``touch``, fire_cells.py):
+dense, a record per cell, or sparse, a per-env pool of 8 x 8 blocks that a block joins when fire, particles,
+water or the generator first write to one of its cells and leaves at the reset, so memory and reset cost follow
+the fire's footprint. The pool is plain fields (not Taichi ``pointer`` SNodes: those keep their memory when a
+field tree is destroyed, Taichi issue 5777, and do not exist on Vulkan), handed out in the fixed order of the
+env's serial updates, so a trajectory is the same in either layout. A full pool is counted (``dropped_blocks``),
+never silent. Which layout, and every capacity, is decided before anything is allocated
+(:mod:`roshan.kernels.fire_layout`).
 
 Cell timers are f64 sums of ``dt`` exactly as the reference accumulates them: with dt = 0.1 the sums run
 slightly below whole numbers, so most whole-second emissions and the burn-out of unrandomised cells happen one
@@ -29,6 +30,7 @@ import taichi as ti
 from roshan.config import FireConfig, IgnitionConfig, WindConfig
 from roshan.kernels import particles as pt
 from roshan.kernels import rng
+from roshan.kernels.fire_cells import draw_durations, durations, emission_periods, record_of, reset_record, touch
 from roshan.kernels.fire_layout import (
     TIMER_GROUPS,
     block_grid,
@@ -40,7 +42,6 @@ from roshan.kernels.fire_layout import (
 )
 from roshan.kernels.fire_parallel import ChunkedStep
 from roshan.kernels.fire_records import (
-    BLOCK_CELLS,
     BLOCK_SHIFT,
     BLOCK_SIDE,
     BURNED_OUT,
@@ -60,7 +61,6 @@ from roshan.kernels.fire_records import (
     N_BURNING,
     N_CONV,
     N_COUNTS,
-    N_DROP_BLOCK,
     N_EXPOSED,
     N_EXTINGUISHED,
     N_FLOODED,
@@ -69,7 +69,6 @@ from roshan.kernels.fire_records import (
     N_LIT,
     N_RAD,
     N_STEP,
-    NEVER,
     STAT_NAMES,
     T_BURN_LEFT,
     T_BURN_TIME,
@@ -385,7 +384,7 @@ class FireSim:
         else:
             for e, c in ti.ndrange(self.num_envs, self.num_cells):  # every cell of the reset envs, in parallel
                 if mask[e] != 0:
-                    self._reset_record(e, c, self.land[c])
+                    reset_record(self, e, c, self.land[c])
 
     @ti.kernel
     def _start_envs(self, mask: ti.types.ndarray(dtype=ti.i32, ndim=1), seed_key: ti.u32):
@@ -409,7 +408,7 @@ class FireSim:
         self.begin_episode(e, seed_key)
         if ti.static(not self.sparse):
             for c in range(self.num_cells):
-                self._reset_record(e, c, self.land[c])
+                reset_record(self, e, c, self.land[c])
         self.light_fires(e)
 
     @ti.func
@@ -438,7 +437,7 @@ class FireSim:
         """Cell c's class id, or BURNING / BURNED / FLOODED."""
         state = 0
         if ti.static(self.sparse):
-            r = self.record_of(e, c)
+            r = record_of(self, e, c)
             state = self.land[c]
             if r >= 0:
                 state = self.cells[e, r][C_STATE]
@@ -449,7 +448,7 @@ class FireSim:
     @ti.func
     def was_extinguished(self, e, c) -> ti.i32:
         """1 if water put cell c out while it was burning, earlier in this episode."""
-        r = self.record_of(e, c)
+        r = record_of(self, e, c)
         out = 0
         if r >= 0:
             out = ti.cast((self.cells[e, r][C_FLAGS] & FLAG_EXTINGUISHED) != 0, ti.i32)
@@ -463,7 +462,7 @@ class FireSim:
     @ti.func
     def mark_of(self, e, c) -> ti.i32:
         """The generator's scratch mark of cell c (0 since the reset)."""
-        r = self.record_of(e, c)
+        r = record_of(self, e, c)
         m = 0
         if r >= 0:
             m = self.mark[e, r]
@@ -472,7 +471,7 @@ class FireSim:
     @ti.func
     def set_mark(self, e, c, m) -> ti.i32:
         """Set the generator's mark of cell c; 0 if the sparse pool had no room for it (counted)."""
-        r = self._touch(e, c)
+        r = touch(self, e, c)
         ok = 0
         if r >= 0:
             self.mark[e, r] = m
@@ -520,7 +519,7 @@ class FireSim:
     @ti.func
     def ignite(self, e, c):
         """Light cell c (the initial-fire generator; callers check can_ignite first)."""
-        r = self._touch(e, c)
+        r = touch(self, e, c)
         if r >= 0:
             self._ignite(e, r, c)
 
@@ -536,105 +535,6 @@ class FireSim:
             alpha = rng.TWO_PI * rng.uniform(rng.key(self.env_key[e], rng.DOMAIN_EPISODE, 0))
         return ti.Vector([ti.cos(alpha), ti.sin(alpha)]) * self.wind_speed
 
-    # ------------------------------------------------------------------------------------------ cell records
-
-    @ti.func
-    def record_of(self, e, c) -> ti.i32:
-        """Record index of cell c in env e; -1 where the sparse layout holds none (the cell is as reset)."""
-        r = c
-        if ti.static(self.sparse):
-            place = self.cell_block[c]
-            slot = self.block_slot[e, place >> BLOCK_SHIFT]
-            r = -1
-            if slot >= 0:
-                r = (slot << BLOCK_SHIFT) | (place & (BLOCK_CELLS - 1))
-        return r
-
-    @ti.func
-    def _touch(self, e, c) -> ti.i32:
-        """Record index of cell c for writing. The sparse layout first gives the cell's block the env's next free
-        slot (reset records for its cells); -1 if the env's pool is full, counted in N_DROP_BLOCK."""
-        r = c
-        if ti.static(self.sparse):
-            place = self.cell_block[c]
-            b = place >> BLOCK_SHIFT
-            slot = self.block_slot[e, b]
-            if slot < 0:
-                n = self.counts[e, N_BLOCKS]
-                if n < self.block_capacity:
-                    slot = n
-                    self.counts[e, N_BLOCKS] = n + 1
-                    self.block_slot[e, b] = slot
-                    self.slot_block[e, slot] = b
-                    self._reset_block(e, b, slot)
-                else:
-                    self.counts[e, N_DROP_BLOCK] += 1
-            r = -1
-            if slot >= 0:
-                r = (slot << BLOCK_SHIFT) | (place & (BLOCK_CELLS - 1))
-        return r
-
-    @ti.func
-    def _reset_block(self, e, b, slot):
-        i0 = (b // self.block_cols) * BLOCK_SIDE
-        j0 = (b % self.block_cols) * BLOCK_SIDE
-        for k in range(BLOCK_CELLS):
-            i = i0 + k // BLOCK_SIDE
-            j = j0 + k % BLOCK_SIDE
-            cls = 0  # the part of an edge block outside the map is never read
-            if i < self.rows and j < self.cols:
-                cls = self.land[i * self.cols + j]
-            self._reset_record(e, (slot << BLOCK_SHIFT) | k, cls)
-
-    @ti.func
-    def _reset_record(self, e, r, cls):
-        """A new episode's cell: its class, no flags. Its durations are drawn when first needed.
-
-        Most cells of an episode are never exposed nor lit, and a reset that drew all of them spent most of a
-        random-action env step (ten hashes and two f64 divisions per cell). The draws are counter-based
-        (keyed by episode and cell), so drawing later gives exactly the same values.
-        """
-        self.cells[e, r] = ti.Vector([cls, 0, -1, 0], ti.i32)
-        self.mark[e, r] = 0
-        self.lit[e, r] = ti.u8(0)
-
-    @ti.func
-    def _durations(self, e, c):
-        """(tau_ign, tau_burn) of cell c this episode, docs/model/fire.md §2.3: durations x (1 + s*u), s in {-1, 0, 1},
-        u ~ U(0.1, 0.2); tau_ign is NEVER for a class that cannot ignite."""
-        cls = self.land[c]
-        k = rng.key(self.env_key[e], rng.DOMAIN_CELLS, c)
-        s1 = ti.cast(rng.uniform_int(rng.key(k, 0, 0), 3) - 1, ti.f64)
-        u1 = 0.1 + 0.1 * ti.cast(rng.uniform(rng.key(k, 1, 0)), ti.f64)
-        s2 = ti.cast(rng.uniform_int(rng.key(k, 2, 0), 3) - 1, ti.f64)
-        u2 = 0.1 + 0.1 * ti.cast(rng.uniform(rng.key(k, 3, 0)), ti.f64)
-        tau_burn = ti.cast(self.cls_tau_burn[cls], ti.f64) * (1.0 + s1 * u1)
-        tau_ign = ti.f64(NEVER)
-        if self.cls_ignitable[cls] != 0:
-            tau_ign = ti.cast(self.cls_tau_ign[cls], ti.f64) * (1.0 + s2 * u2)
-        return ti.Vector([tau_ign, tau_burn], ti.f64)
-
-    @ti.func
-    def _periods(self, c, tau_burn: ti.f64) -> ti.i32:
-        """Convection (low 16 bits) and radiation emission periods of cell c."""
-        cls = self.land[c]
-        return _period(tau_burn, self.cls_n_conv[cls]) | (_period(tau_burn, self.cls_n_rad[cls]) << 16)
-
-    @ti.func
-    def _draw_durations(self, e, r, c):
-        """Once per episode, before cell c (record r) is first exposed or lit: its durations and periods; also
-        clears its exposure and burn timers. The flood timer is set by every flood and read only while the
-        cell is flooded."""
-        flags = self.cells[e, r][C_FLAGS]
-        if (flags & FLAG_DRAWN) == 0:
-            d = self._durations(e, c)
-            self.cells[e, r][C_PERIODS] = self._periods(c, d[1])
-            self.cells[e, r][C_FLAGS] = flags | FLAG_DRAWN
-            self.timers[e, r][T_IGN] = d[0]
-            self.timers[e, r][T_BURN_LEFT] = d[1]
-            self.timers[e, r][T_BURN_TIME] = 0.0
-            self.timers[e, r][T_EXPOSURE] = 0.0
-
     @ti.kernel
     def _export_states(self, out: ti.types.ndarray(dtype=ti.i32, ndim=2)):
         for e, c in ti.ndrange(self.num_envs, self.num_cells):
@@ -646,13 +546,13 @@ class FireSim:
         for e, c in ti.ndrange(self.num_envs, self.num_cells):
             rec = ti.Vector([self.land[c], 0, -1, 0], ti.i32)
             tim = ti.Vector([0.0, 0.0, 0.0, 0.0, 0.0], ti.f64)
-            r = self.record_of(e, c)
+            r = record_of(self, e, c)
             if r >= 0:
                 rec = self.cells[e, r]
                 tim = self.timers[e, r]
-            if (rec[C_FLAGS] & FLAG_DRAWN) == 0:  # what _draw_durations will store, without storing it
-                d = self._durations(e, c)
-                rec[C_PERIODS] = self._periods(c, d[1])
+            if (rec[C_FLAGS] & FLAG_DRAWN) == 0:  # what draw_durations will store, without storing it
+                d = durations(self, e, c)
+                rec[C_PERIODS] = emission_periods(self, c, d[1])
                 rec[C_FLAGS] |= FLAG_DRAWN
                 tim[T_IGN] = d[0]
                 tim[T_BURN_LEFT] = d[1]
@@ -696,8 +596,8 @@ class FireSim:
         self._expose_and_ignite(e, t)
         self._burn(e, step_key)
 
-    # cell_of, visit, drain_floods, light and burn_tick (and record_of) are public: the chunked update
-    # (fire_parallel.py) runs them on its chunks, so that both paths share one copy of the physics.
+    # cell_of, visit, drain_floods, light and burn_tick are public: the chunked update (fire_parallel.py) runs them
+    # on its chunks, so that both paths share one copy of the physics.
 
     @ti.func
     def cell_of(self, x1, x2):
@@ -712,12 +612,12 @@ class FireSim:
     @ti.func
     def visit(self, e, c, t):
         """A live particle sits in cell c during update t: stamp it and add it to the exposed list once."""
-        r = self._touch(e, c)
+        r = touch(self, e, c)
         if r >= 0:
             self.cells[e, r][C_VISIT] = t
             flags = self.cells[e, r][C_FLAGS]
             if self.cls_ignitable[self.cells[e, r][C_STATE]] != 0 and (flags & FLAG_EXPOSED) == 0:
-                self._draw_durations(e, r, c)
+                draw_durations(self, e, r, c)
                 self.cells[e, r][C_FLAGS] |= FLAG_EXPOSED
                 n = self.counts[e, N_EXPOSED]
                 self.exposed[e, n] = c
@@ -728,7 +628,7 @@ class FireSim:
         w = 0
         for k in range(self.counts[e, N_FLOODED]):
             c = self.flooded[e, k]
-            r = self.record_of(e, c)  # a listed cell has a record
+            r = record_of(self, e, c)  # a listed cell has a record
             f = self.timers[e, r][T_FLOOD] + ti.f64(self.dt)
             if f >= self.flood_duration:  # the flood ends: back to the original class, or burned
                 self.timers[e, r][T_FLOOD] = self.flood_duration
@@ -748,7 +648,7 @@ class FireSim:
         w = 0
         for k in range(self.counts[e, N_EXPOSED]):
             c = self.exposed[e, k]
-            r = self.record_of(e, c)
+            r = record_of(self, e, c)
             flags = self.cells[e, r][C_FLAGS]
             if self.cells[e, r][C_VISIT] != t:
                 self.cells[e, r][C_FLAGS] = flags & ~FLAG_EXPOSED
@@ -774,7 +674,7 @@ class FireSim:
     def light(self, e, r, c) -> ti.i32:
         """The record half of an ignition (the list half is the caller's); 1 if the cell is lit for the first
         time this episode."""
-        self._draw_durations(e, r, c)
+        draw_durations(self, e, r, c)
         self.cells[e, r][C_STATE] = BURNING
         first = 0
         if self.lit[e, r] == 0:
@@ -787,7 +687,7 @@ class FireSim:
         w = 0
         for k in range(self.counts[e, N_BURNING]):
             c = self.burning[e, k]
-            emits = self.burn_tick(e, self.record_of(e, c))
+            emits = self.burn_tick(e, record_of(self, e, c))
             if (emits & EMIT_CONV) != 0:
                 pt.emit_convection(self, e, c, step_key)
             if (emits & EMIT_RAD) != 0:
@@ -842,7 +742,7 @@ class FireSim:
     def drop_water(self, e, c) -> ti.i32:
         """docs/model/fire.md §8: flood cell c of env e; returns 1 if it was burning (extinguished). A drop the sparse
         pool has no room for is counted in N_DROP_BLOCK and changes nothing."""
-        r = self._touch(e, c)
+        r = touch(self, e, c)
         was_burning = 0
         if r >= 0:
             state = self.cells[e, r][C_STATE]
@@ -871,7 +771,7 @@ class FireSim:
         for e in range(self.num_envs):
             for c in range(self.num_cells):
                 if mask[e, c] != 0 and self.can_ignite(e, c) != 0:
-                    r = self._touch(e, c)
+                    r = touch(self, e, c)
                     if r >= 0:
                         if (self.cells[e, r][C_FLAGS] & FLAG_EXPOSED) != 0:
                             _remove_from_list(self.exposed, self.counts, e, N_EXPOSED, c)
@@ -884,15 +784,6 @@ class FireSim:
             for c in range(self.num_cells):
                 if mask[e, c] != 0:
                     self.visit(e, c, self.counts[e, N_STEP] + 1)
-
-
-@ti.func
-def _period(tau_burn: ti.f64, n: ti.i32) -> ti.i32:
-    """Emission period in whole seconds: max(1, floor((tau_burn - 1) / n)) (docs/model/fire.md §2.3)."""
-    p = 1
-    if n > 0:
-        p = ti.max(1, ti.cast(ti.floor((tau_burn - 1.0) / n), ti.i32))
-    return p
 
 
 @ti.func

@@ -27,6 +27,7 @@ import taichi as ti
 
 from roshan.kernels import particles as pt
 from roshan.kernels import rng
+from roshan.kernels.fire_cells import record_of
 from roshan.kernels.fire_records import (
     BURNED_OUT,
     C_FLAGS,
@@ -179,7 +180,7 @@ class ChunkedStep:
     def _stamp(self, e, c, t) -> ti.i32:
         """A visit that needs no order: the cell has a record and is not an ignitable cell waiting to be
         exposed. Stamps it and returns 1; otherwise returns 0 (the visit is queued for the serial replay)."""
-        r = self.sim.record_of(e, c)
+        r = record_of(self.sim, e, c)
         done = 0
         if r >= 0:
             self.sim.cells[e, r][C_VISIT] = t
@@ -270,7 +271,7 @@ class ChunkedStep:
         new = 0
         for k in range(lo, hi):
             c = self.sim.exposed[e, k]
-            r = self.sim.record_of(e, c)
+            r = record_of(self.sim, e, c)
             flags = self.sim.cells[e, r][C_FLAGS]
             if self.sim.cells[e, r][C_VISIT] != t:
                 self.sim.cells[e, r][C_FLAGS] = flags & ~FLAG_EXPOSED
@@ -314,7 +315,7 @@ class ChunkedStep:
         burned = 0
         for k in range(lo, hi):
             c = self.sim.burning[e, k]
-            emits = self.sim.burn_tick(e, self.sim.record_of(e, c))
+            emits = self.sim.burn_tick(e, record_of(self.sim, e, c))
             if (emits & (EMIT_CONV | EMIT_RAD)) != 0:
                 self.queue[lo + queued] = (c << 2) | (emits & (EMIT_CONV | EMIT_RAD))
                 queued += 1

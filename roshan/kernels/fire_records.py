@@ -11,7 +11,7 @@ T_IGN, T_BURN_LEFT, T_BURN_TIME, T_EXPOSURE, T_FLOOD = range(5)
 TIMER_FIELDS = 5
 FLAG_EXPOSED = 1  # the cell is in the exposed ("ticking") list
 FLAG_BURNED_DOWN = 2  # burned out completely once (a flood returns it to BURNED)
-FLAG_DRAWN = 4  # this episode's durations, periods and exposure/burn timers are set (see _draw_durations)
+FLAG_DRAWN = 4  # this episode's durations, periods and exposure/burn timers are set (see fire_cells.draw_durations)
 FLAG_EXTINGUISHED = 8  # water put this cell out while it burned, this episode (read by rendering only)
 NEVER = -1.0  # tau_ign of cells that cannot ignite (the reference skips their exposure)
 
