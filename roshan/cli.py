@@ -496,25 +496,10 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
 def experiment_report(spec_path, budget, storage, root, out_dir):
     """Thesis-style tables of SPEC's finished runs (mean ± std (median) over seeds beside the thesis's values),
     per-seed rows (CSV, JSON) and a plot."""
-    from roshan.experiment.report import markdown, write_report
-    from roshan.experiment.runner import experiment_dir, load_experiment, progress, spec_storage
-    from roshan.experiment.spec import load_spec
-    from roshan.study.storage import open_storage
+    from roshan.experiment.report import report_experiment
 
     with reported():
-        spec = load_spec(spec_path, budget)
-        url = spec_storage(spec, root, storage)
-        if "://" not in url and not Path(url).is_file():
-            raise FileNotFoundError(f"{url}: no experiment journal; run `roshan experiment run {spec_path}` first "
-                                    "(or give --storage / --root)")
-        study = load_experiment(open_storage(url, heartbeat=None, repair=False), spec.name)
-        out = Path(out_dir) if out_dir else experiment_dir(root, spec.name) / "report"
-        rows = write_report(spec, study, out)
-    p = progress(study, set(spec.fingerprints()))
-    click.echo(f"experiment {spec.name}: {p['done']}/{len(spec.runs())} runs done, {p['running']} running, "
-               f"{p['waiting']} waiting" + (f", {p['failed']} failed" if p["failed"] else ""))
-    click.echo(markdown(spec, rows))
-    click.echo(f"wrote {out}/report.md, per_seed.csv, summary.json, runs/, success.png")
+        click.echo(report_experiment(spec_path, budget, storage, root, out_dir))
 
 
 # ------------------------------------------------------------------------------------------------ bench
@@ -602,22 +587,7 @@ def bench_memory(steps, rss_envs, rss_steps, json_path, arch, threads):
     from roshan.tools import bench as b
 
     used = init_taichi(arch or "cpu", threads)
-    rows = []
-    click.echo(b.FOOTPRINT_HEADER)
-    for land in (b.load_map("35x36_Woods"), b.load_map("Borkenberge"), b.tiled_map()):
-        for pct, n, episodes in ((0.015, steps, 3), (0.35, max(1, steps // 10), 1)):
-            big = land.rows * land.cols > 100_000 and pct < 0.1  # where auto picks sparse for many envs
-            for layout in ("sparse", "dense") if big else ("auto",):
-                r = b.fire_footprint(land, pct, n, layout, episodes)
-                rows.append(r)
-                click.echo(b.format_footprint_row(r))
-    report = {"arch": used, "threads": threads, "runs": rows}
-    if rss_envs:
-        report["rss"] = rss = b.big_map_rss(rss_envs, rss_steps, used, threads)
-        click.echo(f"{rss_envs} envs of the 941k-cell map ({rss['layout']}), {rss_steps} updates: peak RSS "
-                   f"{rss['max_rss_bytes'] / 2**30:.2f} GiB ({rss['start_rss_bytes'] / 2**30:.2f} GiB before the "
-                   f"simulator, whose fields were estimated at {rss['estimate_bytes'] / 2**30:.2f} GiB), dropped "
-                   f"blocks {rss['dropped_blocks']}")
+    report = b.memory_report(steps, rss_envs, rss_steps, used, threads, click.echo)
     if json_path:
         Path(json_path).write_text(json.dumps(report, indent=1))
 
