@@ -157,8 +157,7 @@ class VectorEnvCore(gym.vector.VectorEnv):
         self._check_runtime("reset()")
         super().reset(seed=seed)
         if seed is not None:
-            self.fire.seed = int(seed)
-            self.fire.episode.fill(-1)
+            self.fire.restart_streams(seed)
         self.kernels.reset_all(*self._kernel_obs(), self.fire.seed_key)
         self._episode.zero_()
         self._dones.zero_()
