@@ -41,3 +41,16 @@ def test_rows_are_drones_for_flyagents_and_envs_for_the_planner():
     fly = level_rows(load_config(None, ["drones.num_drones=3"]))
     assert isinstance(fly, DroneRows) and fly.per_env == 3
     assert isinstance(level_rows(load_config(None, ["train.algo=planner", "drones.num_drones=3"])), EnvRows)
+
+
+def test_no_module_guesses_the_level_from_the_algos_name():
+    """``train.algo`` is mapped to a level in one place (roshan/config/levels.py); elsewhere an algo is a key of a
+    table (agents, learners), never compared with a name."""
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "roshan"
+    compare = re.compile(r"""algo"?\]?\)?\s*(==|!=|\bin\b\s*\()\s*["'(]""")
+    found = [f"{p.relative_to(root)}:{n}: {line.strip()}" for p in sorted(root.rglob("*.py"))
+             if p.name != "levels.py" for n, line in enumerate(p.read_text().splitlines(), 1) if compare.search(line)]
+    assert not found, found

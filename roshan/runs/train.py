@@ -172,7 +172,7 @@ class Trainer:
 
     def _bar(self):
         tc = self.cfg.train
-        total = tc.total_steps if tc.total_steps and tc.algo != "iql" else None
+        total = tc.total_steps if tc.total_steps and self.learner.counts_env_steps else None
         return tqdm(total=total, initial=self.progress.env_steps if total else self.progress.updates,
                     unit="step" if total else "update", dynamic_ncols=True,
                     disable=not self.progress_bar, desc=self.run_dir.name)
