@@ -2,6 +2,7 @@
 
 import contextlib
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -35,6 +36,27 @@ CONFIG = click.option("--config", "-c", "config_path", type=click.Path(dir_okay=
 
 def _fail(exc: Exception) -> None:
     raise click.ClickException(str(exc)) from exc
+
+
+def _gif_name(ctx, param, value):
+    """A --gif file name must end in .gif: the file is a GIF whatever its name, and a viewer goes by the suffix."""
+    if value is not None and not str(value).lower().endswith(".gif"):
+        raise click.BadParameter(f"{value!r} does not end in .gif (the file written is a GIF)")
+    return value
+
+
+def _number_list(text: str, option: str, kind: type, lowest: float, highest: float | None = None) -> list:
+    """``text`` as comma-separated numbers of ``kind`` in [lowest, highest], or a usage error naming ``option``."""
+    try:
+        values = [kind(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        values = []
+    bad = [v for v in values if not (lowest <= v <= (math.inf if highest is None else highest))]
+    if not values or bad:
+        where = f"from {lowest}" + ("" if highest is None else f" to {highest}")
+        raise click.BadParameter(f"expected comma-separated {kind.__name__} values {where}, got {text!r}",
+                                 param_hint=option)
+    return values
 
 
 @contextlib.contextmanager
@@ -71,7 +93,8 @@ def main():
 @click.option("--frames", type=click.Path(file_okay=False), default=None, help="Write PNG frames of env 0 here.")
 @click.option("--every", type=click.IntRange(min=1), default=100, show_default=True,
               help="Record statistics (and a frame) every K steps.")
-@click.option("--gif", type=click.Path(dir_okay=False), default=None, help="Stitch the frames into this GIF.")
+@click.option("--gif", type=click.Path(dir_okay=False), default=None, callback=_gif_name,
+              help="Stitch the frames into this GIF.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
               help="Write {config, series, timing} (and drones, with --drones) here.")
 @click.option("--replace", is_flag=True, help="Overwrite existing --gif / --json files and the frames of a --frames "
@@ -253,7 +276,8 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
                    "the --save-buffer FILE); without it such outputs are refused.")
 @click.option("--frames", "frames_dir", type=click.Path(file_okay=False), default=None,
               help="PNG frames of env 0's first episode.")
-@click.option("--gif", "gif_path", type=click.Path(dir_okay=False), default=None, help="GIF of env 0's first episode.")
+@click.option("--gif", "gif_path", type=click.Path(dir_okay=False), default=None, callback=_gif_name,
+              help="GIF of env 0's first episode.")
 @click.option("--baseline", type=click.Choice(["random", "greedy"]), default=None,
               help="Also run this scripted policy on the same episodes and print both side by side.")
 @click.option("--save-buffer", nargs=2, type=(click.IntRange(min=1), click.Path(dir_okay=False)), default=None,
@@ -314,6 +338,7 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, replace, f
 @click.option("--fps", type=click.FloatRange(min=0.1), default=10.0, show_default=True,
               help="Frames a second, at most.")
 @click.option("--gif", "gif_path", type=click.Path(dir_okay=False), default="out/watch.gif", show_default=True,
+              callback=_gif_name,
               help="Where the frames go when no window can be shown.")
 @click.option("--screenshot", type=click.Path(dir_okay=False), default=None,
               help="Save the last frame as this PNG: the window's, or without a display the GIF's last frame.")
@@ -553,16 +578,13 @@ def bench_fire(env_counts, steps, warmup, big, json_path, arch, threads):
     from roshan.runtime import init_taichi
     from roshan.tools import bench as b
 
+    counts = _number_list(env_counts, "--envs", int, lowest=1)
     used = init_taichi(arch or "cpu", threads)
-    try:
-        counts = [int(x) for x in env_counts.split(",") if x.strip()]
-    except ValueError as exc:
-        _fail(ValueError(f"--envs: expected comma-separated integers, got {env_counts!r}"))
-        raise exc
     click.echo(f"timing {2 * len(counts) + 2 * big} runs; each row as it finishes:", err=True)
     click.echo(b.FIRE_SPEED_HEADER, err=True)
-    report = b.fire_speed(counts, steps, warmup, big=big, arch=used, threads=threads,
-                          on_row=lambda r: click.echo(b.format_fire_row(r), err=True))
+    with reported():
+        report = b.fire_speed(counts, steps, warmup, big=big, arch=used, threads=threads,
+                              on_row=lambda r: click.echo(b.format_fire_row(r), err=True))
     click.echo(b.format_fire_speed(report))
     if json_path:
         Path(json_path).write_text(json.dumps(report, indent=1))
@@ -610,12 +632,9 @@ def bench_env(env_counts, drones, fire_percentages, policies, min_env_steps, jso
     from roshan.runtime import init_taichi
     from roshan.tools import bench as b
 
+    counts = _number_list(env_counts, "--envs", int, lowest=1)
+    pcts = _number_list(fire_percentages, "--fire", float, lowest=0.0, highest=1.0)
     init_taichi(arch or "cpu", threads)
-    try:
-        counts = [int(x) for x in env_counts.split(",") if x.strip()]
-        pcts = [float(x) for x in fire_percentages.split(",") if x.strip()]
-    except ValueError as exc:
-        _fail(ValueError(f"--envs / --fire: expected comma-separated numbers ({exc})"))
     pols = [None if p == "random" else p for p in policies.split(",") if p.strip()]
     known = (None, "simple", "collision", "fly_collision", "simple+ppo", "collision+ppo")
     unknown = [p for p in pols if p not in known]
