@@ -33,7 +33,7 @@ else
 endif
 STAMP := $(STAMP_DIR)/.roshan-installed-$(INSTALL_KEY)
 
-.PHONY: install system-deps demo test lint bench-fire bench-fidelity clean print-python
+.PHONY: install system-deps demo test test-fast lint bench-fire bench-fidelity clean print-python
 
 install: $(STAMP)
 
@@ -82,7 +82,11 @@ demo: install
 # One process: two pytest-xdist workers (a file to each) took 1,281 s on the 2-core machine against 1,263 s
 # serially (Taichi's kernels already use both cores), so the suite runs serially.
 test: install
-	$(PYTHON) -m pytest -q
+	$(PYTHON) -m pytest -q --durations=15
+
+# The edit loop: everything but the tests marked slow (long physics or training runs; CI runs them all).
+test-fast: install
+	$(PYTHON) -m pytest -q -m "not slow"
 
 lint: install
 	$(PYTHON) -m ruff check .

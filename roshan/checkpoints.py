@@ -24,7 +24,7 @@ from pathlib import Path
 
 import torch
 
-from roshan.config import Config, ConfigError, from_dict, to_dict, upgrade_config_dict
+from roshan.config import ALGO_LEVELS, PLANNER, Config, ConfigError, from_dict, to_dict, upgrade_config_dict
 from roshan.io import atomic_file, prepare_output, writing
 
 CHECKPOINTS = ("latest", "best_reward", "best_objective", "best_eval")
@@ -137,7 +137,7 @@ def upgrade_checkpoint(state: dict) -> dict:
     lists of the one PPO class (the network weights are untouched)."""
     state = {**state, "config": upgrade_config_dict(state["config"])}
     agent = state.get("agent")
-    if state["algo"] == "planner" and isinstance(agent, dict) and "optimizer" in agent:
+    if ALGO_LEVELS.get(state["algo"]) is PLANNER and isinstance(agent, dict) and "optimizer" in agent:
         agent = {k: v for k, v in agent.items() if k not in ("optimizer", "scheduler")}
         state["agent"] = {**agent, "optimizers": [state["agent"]["optimizer"]],
                           "schedulers": [state["agent"]["scheduler"]]}
@@ -165,20 +165,16 @@ def setting(cfg: Config, key: str):
 
 def model_keys(cfg: Config) -> tuple[str, ...]:
     """The config keys that decide the network shapes of ``cfg.train.algo`` and the observations it serves."""
-    algo = cfg.train.algo
-    if algo == "planner":  # one network over all drones: their count is in its shapes
-        return "train.algo", "planner.network", "drones.num_drones"
-    section = "ppo" if algo == "ppo" else algo
-    return "train.algo", "fly.collision", "fly.frames", f"{section}.share_encoder"
+    return cfg.train.level.model_keys(cfg.train.algo)
 
 
 def optimiser_keys(cfg: Config) -> tuple[str, ...]:
     """The config keys whose optimiser state a resume loads: another family (Adam's moments into SGD) or another
     count of optimisers cannot take it."""
-    algo = cfg.train.algo
-    if algo in ("ppo", "planner"):  # a run without RND resumes from one with it (its RND state is not read)
+    section = cfg.train.section
+    if section == "ppo":  # a run without RND resumes from one with it (its RND state is not read)
         return "ppo.optim.name", "ppo.separate_optimizers", *(("rnd.enabled",) if cfg.rnd.enabled else ())
-    return (f"{algo}.optim.name",)
+    return (f"{section}.optim.name",)
 
 
 def config_differences(cfg: Config, saved: Config, keys) -> list[str]:

@@ -2,6 +2,7 @@
 
 import contextlib
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -35,6 +36,27 @@ CONFIG = click.option("--config", "-c", "config_path", type=click.Path(dir_okay=
 
 def _fail(exc: Exception) -> None:
     raise click.ClickException(str(exc)) from exc
+
+
+def _gif_name(ctx, param, value):
+    """A --gif file name must end in .gif: the file is a GIF whatever its name, and a viewer goes by the suffix."""
+    if value is not None and not str(value).lower().endswith(".gif"):
+        raise click.BadParameter(f"{value!r} does not end in .gif (the file written is a GIF)")
+    return value
+
+
+def _number_list(text: str, option: str, kind: type, lowest: float, highest: float | None = None) -> list:
+    """``text`` as comma-separated numbers of ``kind`` in [lowest, highest], or a usage error naming ``option``."""
+    try:
+        values = [kind(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        values = []
+    bad = [v for v in values if not (lowest <= v <= (math.inf if highest is None else highest))]
+    if not values or bad:
+        where = f"from {lowest}" + ("" if highest is None else f" to {highest}")
+        raise click.BadParameter(f"expected comma-separated {kind.__name__} values {where}, got {text!r}",
+                                 param_hint=option)
+    return values
 
 
 @contextlib.contextmanager
@@ -71,7 +93,8 @@ def main():
 @click.option("--frames", type=click.Path(file_okay=False), default=None, help="Write PNG frames of env 0 here.")
 @click.option("--every", type=click.IntRange(min=1), default=100, show_default=True,
               help="Record statistics (and a frame) every K steps.")
-@click.option("--gif", type=click.Path(dir_okay=False), default=None, help="Stitch the frames into this GIF.")
+@click.option("--gif", type=click.Path(dir_okay=False), default=None, callback=_gif_name,
+              help="Stitch the frames into this GIF.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
               help="Write {config, series, timing} (and drones, with --drones) here.")
 @click.option("--replace", is_flag=True, help="Overwrite existing --gif / --json files and the frames of a --frames "
@@ -253,7 +276,8 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
                    "the --save-buffer FILE); without it such outputs are refused.")
 @click.option("--frames", "frames_dir", type=click.Path(file_okay=False), default=None,
               help="PNG frames of env 0's first episode.")
-@click.option("--gif", "gif_path", type=click.Path(dir_okay=False), default=None, help="GIF of env 0's first episode.")
+@click.option("--gif", "gif_path", type=click.Path(dir_okay=False), default=None, callback=_gif_name,
+              help="GIF of env 0's first episode.")
 @click.option("--baseline", type=click.Choice(["random", "greedy"]), default=None,
               help="Also run this scripted policy on the same episodes and print both side by side.")
 @click.option("--save-buffer", nargs=2, type=(click.IntRange(min=1), click.Path(dir_okay=False)), default=None,
@@ -314,6 +338,7 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, replace, f
 @click.option("--fps", type=click.FloatRange(min=0.1), default=10.0, show_default=True,
               help="Frames a second, at most.")
 @click.option("--gif", "gif_path", type=click.Path(dir_okay=False), default="out/watch.gif", show_default=True,
+              callback=_gif_name,
               help="Where the frames go when no window can be shown.")
 @click.option("--screenshot", type=click.Path(dir_okay=False), default=None,
               help="Save the last frame as this PNG: the window's, or without a display the GIF's last frame.")
@@ -496,25 +521,10 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
 def experiment_report(spec_path, budget, storage, root, out_dir):
     """Thesis-style tables of SPEC's finished runs (mean ± std (median) over seeds beside the thesis's values),
     per-seed rows (CSV, JSON) and a plot."""
-    from roshan.experiment.report import markdown, write_report
-    from roshan.experiment.runner import experiment_dir, load_experiment, progress, spec_storage
-    from roshan.experiment.spec import load_spec
-    from roshan.study.storage import open_storage
+    from roshan.experiment.report import report_experiment
 
     with reported():
-        spec = load_spec(spec_path, budget)
-        url = spec_storage(spec, root, storage)
-        if "://" not in url and not Path(url).is_file():
-            raise FileNotFoundError(f"{url}: no experiment journal; run `roshan experiment run {spec_path}` first "
-                                    "(or give --storage / --root)")
-        study = load_experiment(open_storage(url, heartbeat=None, repair=False), spec.name)
-        out = Path(out_dir) if out_dir else experiment_dir(root, spec.name) / "report"
-        rows = write_report(spec, study, out)
-    p = progress(study, set(spec.fingerprints()))
-    click.echo(f"experiment {spec.name}: {p['done']}/{len(spec.runs())} runs done, {p['running']} running, "
-               f"{p['waiting']} waiting" + (f", {p['failed']} failed" if p["failed"] else ""))
-    click.echo(markdown(spec, rows))
-    click.echo(f"wrote {out}/report.md, per_seed.csv, summary.json, runs/, success.png")
+        click.echo(report_experiment(spec_path, budget, storage, root, out_dir))
 
 
 # ------------------------------------------------------------------------------------------------ bench
@@ -568,16 +578,13 @@ def bench_fire(env_counts, steps, warmup, big, json_path, arch, threads):
     from roshan.runtime import init_taichi
     from roshan.tools import bench as b
 
+    counts = _number_list(env_counts, "--envs", int, lowest=1)
     used = init_taichi(arch or "cpu", threads)
-    try:
-        counts = [int(x) for x in env_counts.split(",") if x.strip()]
-    except ValueError as exc:
-        _fail(ValueError(f"--envs: expected comma-separated integers, got {env_counts!r}"))
-        raise exc
     click.echo(f"timing {2 * len(counts) + 2 * big} runs; each row as it finishes:", err=True)
     click.echo(b.FIRE_SPEED_HEADER, err=True)
-    report = b.fire_speed(counts, steps, warmup, big=big, arch=used, threads=threads,
-                          on_row=lambda r: click.echo(b.format_fire_row(r), err=True))
+    with reported():
+        report = b.fire_speed(counts, steps, warmup, big=big, arch=used, threads=threads,
+                              on_row=lambda r: click.echo(b.format_fire_row(r), err=True))
     click.echo(b.format_fire_speed(report))
     if json_path:
         Path(json_path).write_text(json.dumps(report, indent=1))
@@ -602,22 +609,7 @@ def bench_memory(steps, rss_envs, rss_steps, json_path, arch, threads):
     from roshan.tools import bench as b
 
     used = init_taichi(arch or "cpu", threads)
-    rows = []
-    click.echo(b.FOOTPRINT_HEADER)
-    for land in (b.load_map("35x36_Woods"), b.load_map("Borkenberge"), b.tiled_map()):
-        for pct, n, episodes in ((0.015, steps, 3), (0.35, max(1, steps // 10), 1)):
-            big = land.rows * land.cols > 100_000 and pct < 0.1  # where auto picks sparse for many envs
-            for layout in ("sparse", "dense") if big else ("auto",):
-                r = b.fire_footprint(land, pct, n, layout, episodes)
-                rows.append(r)
-                click.echo(b.format_footprint_row(r))
-    report = {"arch": used, "threads": threads, "runs": rows}
-    if rss_envs:
-        report["rss"] = rss = b.big_map_rss(rss_envs, rss_steps, used, threads)
-        click.echo(f"{rss_envs} envs of the 941k-cell map ({rss['layout']}), {rss_steps} updates: peak RSS "
-                   f"{rss['max_rss_bytes'] / 2**30:.2f} GiB ({rss['start_rss_bytes'] / 2**30:.2f} GiB before the "
-                   f"simulator, whose fields were estimated at {rss['estimate_bytes'] / 2**30:.2f} GiB), dropped "
-                   f"blocks {rss['dropped_blocks']}")
+    report = b.memory_report(steps, rss_envs, rss_steps, used, threads, click.echo)
     if json_path:
         Path(json_path).write_text(json.dumps(report, indent=1))
 
@@ -640,12 +632,9 @@ def bench_env(env_counts, drones, fire_percentages, policies, min_env_steps, jso
     from roshan.runtime import init_taichi
     from roshan.tools import bench as b
 
+    counts = _number_list(env_counts, "--envs", int, lowest=1)
+    pcts = _number_list(fire_percentages, "--fire", float, lowest=0.0, highest=1.0)
     init_taichi(arch or "cpu", threads)
-    try:
-        counts = [int(x) for x in env_counts.split(",") if x.strip()]
-        pcts = [float(x) for x in fire_percentages.split(",") if x.strip()]
-    except ValueError as exc:
-        _fail(ValueError(f"--envs / --fire: expected comma-separated numbers ({exc})"))
     pols = [None if p == "random" else p for p in policies.split(",") if p.strip()]
     known = (None, "simple", "collision", "fly_collision", "simple+ppo", "collision+ppo")
     unknown = [p for p in pols if p not in known]

@@ -26,6 +26,7 @@ from rasterio.crs import CRS
 from rasterio.errors import CRSError, NotGeoreferencedWarning, RasterioError, WindowError
 
 from roshan.io import refuse_overwrite
+from roshan.memory import check_fits
 
 __all__ = [
     "BURNED",
@@ -328,6 +329,8 @@ def uniform_map(rows: int = 50, cols: int = 50) -> LandCoverMap:
     """
     if int(rows) != rows or int(cols) != cols or rows < 1 or cols < 1:
         raise MapError(f"uniform: rows and cols must be positive integers, got {rows} x {cols}")
+    check_fits(f"the uniform map of {int(rows):,} x {int(cols):,} cells", int(rows) * int(cols) * 4,
+               ["smaller map.uniform_rows / map.uniform_cols"])
     grid = np.full((int(rows), int(cols)), GENERIC_UNBURNED, dtype=np.int32)
     return LandCoverMap("uniform", grid, _UNGEOREFERENCED_CELL_SIZE, None, None, None, is_uniform=True)
 

@@ -20,7 +20,7 @@ ARCHES = ("cpu", "cuda", "vulkan", "auto")
 # costs: BENCHMARKS.md, "Same numbers on every CPU"; tests/test_runtime.py holds the setting.
 FAST_MATH = False
 _current: dict[str, object] = {}
-_reset_hooks: list[Callable[[], None]] = []
+_per_runtime: dict[str, object] = {}  # objects that live as long as the Taichi runtime (for_this_runtime)
 # Bumped whenever the runtime is reset or re-initialised: an object that holds fields compares the number it was
 # built under (an int comparison, cheap enough for every step) to refuse use after its fields died.
 _generation = [0]
@@ -63,7 +63,7 @@ def init_taichi(arch: str = "cpu", threads: int | None = None, debug: bool = Fal
     if threads is not None:
         kwargs["cpu_max_num_threads"] = threads
     if _current:  # ti.init re-initialises: every field and kernel of the old runtime dies
-        _run_reset_hooks()
+        _forget_runtime()
     _plain_source_positions(not debug)
     if arch == "cpu":
         kwargs["arch"] = ti.cpu
@@ -164,13 +164,7 @@ def reset_taichi() -> None:
     if current_arch() is not None:
         ti.reset()
     _current.clear()
-    _run_reset_hooks()
-
-
-def on_taichi_reset(hook: Callable[[], None]) -> None:
-    """Call ``hook`` whenever the Taichi runtime is reset or re-initialised (caches of Taichi objects, such as
-    the simulator pool of :mod:`roshan.kernels.pool`, must forget them then)."""
-    _reset_hooks.append(hook)
+    _forget_runtime()
 
 
 def taichi_generation() -> int:
@@ -186,10 +180,17 @@ def check_built_in_this_runtime(generation: int, what: str) -> None:
                            "init_taichi with other arguments), so its fields are gone; build a new one")
 
 
-def _run_reset_hooks() -> None:
+def for_this_runtime(name: str, make: Callable[[], object]):
+    """The object ``name`` of the current Taichi runtime, made by ``make()`` at its first use; a reset or a new
+    ``ti.init`` forgets it (such as the simulator pool of :mod:`roshan.kernels.pool`, whose fields die then)."""
+    if name not in _per_runtime:
+        _per_runtime[name] = make()
+    return _per_runtime[name]
+
+
+def _forget_runtime() -> None:
     _generation[0] += 1
-    for hook in _reset_hooks:
-        hook()
+    _per_runtime.clear()
 
 
 def torch_device() -> str:

@@ -111,6 +111,15 @@ def test_uniform_map():
         maps.uniform_map(0, 5)
 
 
+def test_a_uniform_map_too_big_for_memory_is_refused_before_it_is_allocated(monkeypatch):
+    from roshan import memory
+
+    monkeypatch.setattr(memory, "available_memory", lambda: (8 * 2**30, "test"))  # whatever the machine has
+    with pytest.raises(memory.MemoryLimitError, match=r"the uniform map of 100,000 x 100,000 cells needs an estimated "
+                                               r".*smaller map.uniform_rows / map.uniform_cols"):
+        maps.uniform_map(100_000, 100_000)  # 37 GiB of class ids: numpy's MemoryError (a traceback) before
+
+
 def test_unknown_name_suggests_closest():
     with pytest.raises(MapError) as err:
         maps.load_map("Borkenberg")

@@ -110,7 +110,7 @@ def _bundle_and_buffers(env) -> tuple[int, int]:
     # every tensor the env owns: views (terminations, observation dicts) have a base and share its bytes
     buffers = sum(t.nbytes for t in vars(env).values() if isinstance(t, torch.Tensor) and t._base is None)
     env.close()
-    entry = next(e for free in pool._free.values() for e in free if e.sims.fire is env.fire)
+    entry = next(e for free in pool.current_pool().free.values() for e in free if e.sims.fire is env.fire)
     copies = type("Copies", (), {})()
     vars(copies).update({f"f{k}": f for k, f in enumerate(entry.pristine.saved)})
     return field_bytes(*sims) + field_bytes(copies), buffers

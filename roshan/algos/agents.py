@@ -23,13 +23,14 @@ def planner_ppo(cfg: PPOConfig, network: str, num_drones: int, device: str | tor
 
 
 def make_agent(cfg: Config, device: str | torch.device = "cpu") -> Agent:
-    """PPO (FlyAgent or planner policy), TD3 or IQL for ``cfg.train.algo``."""
-    collision, frames = cfg.fly.collision, cfg.fly.frames
-    if cfg.train.algo == "ppo":
-        return fly_ppo(cfg.ppo, collision, frames, device, cfg.rnd)
-    if cfg.train.algo == "planner":
-        return planner_ppo(cfg.ppo, cfg.planner.network, cfg.drones.num_drones, device, cfg.rnd,
-                           cfg.planner.temperature)
-    if cfg.train.algo == "td3":
-        return TD3(cfg.td3, collision, frames, device)
-    return IQL(cfg.iql, collision, frames, device)
+    """PPO (FlyAgent or planner policy), TD3 or IQL for ``cfg.train.algo``, with fresh networks."""
+    return AGENTS[cfg.train.algo](cfg, device)
+
+
+AGENTS = {
+    "ppo": lambda cfg, device: fly_ppo(cfg.ppo, cfg.fly.collision, cfg.fly.frames, device, cfg.rnd),
+    "planner": lambda cfg, device: planner_ppo(cfg.ppo, cfg.planner.network, cfg.drones.num_drones, device, cfg.rnd,
+                                               cfg.planner.temperature),
+    "td3": lambda cfg, device: TD3(cfg.td3, cfg.fly.collision, cfg.fly.frames, device),
+    "iql": lambda cfg, device: IQL(cfg.iql, cfg.fly.collision, cfg.fly.frames, device),
+}

@@ -15,6 +15,7 @@ from roshan.checkpoints import (
     load_checkpoint,
     model_keys,
     resolve_checkpoint,
+    setting,
 )
 from roshan.config import Config
 
@@ -53,7 +54,7 @@ def check_fly_model(target: str | Path, key: str = "planner.fly_model") -> None:
 
 
 def refuse_planner(cfg: Config, target: str | Path, path: Path, key: str) -> None:
-    if cfg.train.algo == "planner":
+    if not cfg.train.level.flies:
         raise ValueError(f"{key} = {str(target)!r}: {path} is a planner checkpoint; {key} needs a FlyAgent run")
 
 
@@ -64,9 +65,8 @@ def check_setting(trained: Config, cfg: Config, where: str | Path) -> None:
     diffs = config_differences(cfg, trained, model_keys(trained))
     if diffs:
         raise CheckpointMismatch(f"{where}: the network cannot serve this setting: " + "; ".join(diffs))
-    if cfg.train.algo == "planner":
-        check_fly_model(cfg.planner.fly_model, "planner.fly_model")
-        check_fly_model(cfg.planner.explorer_model, "planner.explorer_model")
+    for key in cfg.train.level.frozen_models:
+        check_fly_model(setting(cfg, key), key)
 
 
 def policy_fn(agent: Agent):

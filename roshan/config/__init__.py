@@ -29,6 +29,7 @@ from roshan.config.learning import (
     TD3Config,
     TrainConfig,
 )
+from roshan.config.levels import ALGO_LEVELS, FLY_AGENT, PLANNER, Level, level_of
 from roshan.config.schema import (
     ConfigError,
     choice,
@@ -72,7 +73,7 @@ class Config(schema.Section):
 
     def __post_init__(self):
         super().__post_init__()  # each section is a section of its class (they validated themselves)
-        if self.train.algo == "planner":
+        if not self.train.level.flies:
             check_planner_ppo(self.ppo)
 
 
@@ -121,10 +122,11 @@ load_run_config = load_config
 
 
 __all__ = [
-    "CONTROLLERS", "PLANNER_NEWEST_TERMS", "PLANNER_PRESETS", "PRESETS", "Config", "ConfigError",
+    "ALGO_LEVELS", "CONTROLLERS", "FLY_AGENT", "Level", "PLANNER", "PLANNER_NEWEST_TERMS", "PLANNER_PRESETS",
+    "PRESETS", "Config", "ConfigError",
     "ConvectionConfig", "DroneConfig", "FireConfig", "FlyConfig", "IQLConfig", "IgnitionConfig", "MapConfig",
     "FLY_ONLY_PPO_KEYS", "OptimConfig", "PPOConfig", "PlannerConfig", "PlannerRewardConfig", "RNDConfig",
     "RadiationConfig", "RewardConfig", "SimConfig", "TD3Config", "TrainConfig", "WindConfig", "all_keys",
     "apply_overrides", "choice", "dump_config", "from_dict", "load_config", "load_run_config", "num", "replace",
-    "show_keys", "suggest", "to_dict", "upgrade_config_dict",
+    "level_of", "show_keys", "suggest", "to_dict", "upgrade_config_dict",
 ]

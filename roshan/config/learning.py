@@ -2,6 +2,7 @@
 
 from dataclasses import dataclass, field
 
+from roshan.config.levels import ALGO_LEVELS, ALGO_SECTIONS, Level, level_of
 from roshan.config.schema import Section, choice, num
 
 OPTIMIZER_NAMES = ("adam", "adamw", "sgd", "rmsprop", "radam")
@@ -13,7 +14,7 @@ class TrainConfig(Section):
     """The training loop: budget, evaluation and repetitions (the batch of envs and the seed are ``sim.envs`` /
     ``sim.seed``, as for every command)."""
 
-    algo: str = choice("ppo", ("ppo", "td3", "iql", "planner"), doc="planner: PPO on the PlannerAgent level")
+    algo: str = choice("ppo", tuple(ALGO_LEVELS), doc="planner: PPO on the PlannerAgent level")
     total_steps: int = num(1_000_000, 0, doc="env steps (each moves every drone once; planner: decisions); "
                                                 "0 = no limit")
     max_updates: int = num(0, 0, doc="updates; 0 = no limit")
@@ -28,6 +29,16 @@ class TrainConfig(Section):
     torch_threads: int = num(0, 0, doc="torch intra-op threads; 0 = torch's default")
     buffer_path: str = ""  # IQL: the replay buffer to learn from (``roshan eval --save-buffer``)
     init_from: str = ""  # start from these network weights (a run folder's best or a checkpoint): fine-tuning
+
+    @property
+    def level(self) -> Level:
+        """The level ``algo`` trains (:mod:`roshan.config.levels`)."""
+        return level_of(self.algo)
+
+    @property
+    def section(self) -> str:
+        """The config section of ``algo``'s hyperparameters (``ppo`` for the planner too)."""
+        return ALGO_SECTIONS[self.algo]
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,8 @@ as ``ppo`` without the FlyAgent-only ones, plus ``network``, other defaults) and
   command reads ``sim.envs`` / ``sim.seed``.
 """
 
+from roshan.config.levels import ALGO_LEVELS, PLANNER
+
 # Old dotted key -> its key now (also applied to ``--set`` overrides).
 MOVED_KEYS = {"train.num_envs": "sim.envs", "train.seed": "sim.seed"}
 
@@ -49,6 +51,6 @@ def upgrade_planner_ppo(data: dict) -> dict:
     network = old.pop("network", None)
     if network is not None:
         data["planner"] = {**(data.get("planner") or {}), "network": network}
-    if (data.get("train") or {}).get("algo") == "planner":
+    if ALGO_LEVELS.get((data.get("train") or {}).get("algo")) is PLANNER:
         data["ppo"] = {**OLD_PLANNER_PPO_DEFAULTS, **old}
     return data

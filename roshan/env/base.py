@@ -68,9 +68,8 @@ class VectorEnvCore(gym.vector.VectorEnv):
         self.fire, self.drones, self.kernels, self._viewer = sims.fire, sims.drones, sims.kernels, sims.viewer
         self.t_max = sims.t_max
         self._has_reset = False
-        # Frames: the caption's controller name, and env 0's last frame of an episode (see keep_final_frame).
+        # Frames: the caption's controller name, and env 0's last frame of an episode (with a render_mode).
         self.caption_name = self.default_caption_name
-        self.keep_final_frame = False
         self.final_frame: np.ndarray | None = None
 
     # ------------------------------------------------------------------------------------------ construction
@@ -158,8 +157,7 @@ class VectorEnvCore(gym.vector.VectorEnv):
         self._check_runtime("reset()")
         super().reset(seed=seed)
         if seed is not None:
-            self.fire.seed = int(seed)
-            self.fire.episode.fill(-1)
+            self.fire.restart_streams(seed)
         self.kernels.reset_all(*self._kernel_obs(), self.fire.seed_key)
         self._episode.zero_()
         self._dones.zero_()
@@ -174,7 +172,7 @@ class VectorEnvCore(gym.vector.VectorEnv):
         if not self._has_reset:
             raise gym.error.ResetNeeded(f"{type(self).__name__}.step() before reset(): call reset() first")
         self._advance(actions)
-        if self.keep_final_frame:  # frames only (a host read): env 0's final state, before the autoreset below
+        if self.render_mode is not None:  # frames only (a host read): env 0's final state, before the autoreset
             self.final_frame = self.render() if bool(self._dones[0].any()) else None
         # On the CPU, reading the done flags costs a microsecond (numpy's view; torch's any() costs ~10) and saves
         # the reset launch (~150 us) in the many steps where no episode ends; on a GPU that read would
@@ -209,8 +207,8 @@ class VectorEnvCore(gym.vector.VectorEnv):
         (:meth:`caption`) and a legend band below it.
 
         Rendering happens after the same-step autoreset, so on a step where env 0's episode ended this shows the
-        next episode's first state; set :attr:`keep_final_frame` to have :meth:`step` render env 0's final
-        state into :attr:`final_frame` before it resets (None on steps where env 0 did not end).
+        next episode's first state. An env built with ``render_mode="rgb_array"`` has :meth:`step` render env 0's
+        final state into :attr:`final_frame` before it resets (None on steps where env 0 did not end).
         """
         self._check_runtime("render()")
         return self._viewer.render(self.caption())

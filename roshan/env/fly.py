@@ -36,12 +36,12 @@ class FlyVectorEnv(VectorEnvCore):
     With ``FlyConfig.frame_skips = k`` one ``step`` applies the actions for k physics steps (fewer when the
     episode ends inside them) and returns the last step's rewards (the episode ``return`` sums those); step
     limits and the episode's ``steps`` count physics steps. With ``DroneConfig.use_water_limit`` the tanks are
-    readable as :attr:`water`.
+    readable as :attr:`water`. ``fly`` overrides the task section of ``config`` (default: ``config.fly``).
     """
 
     def __init__(self, num_envs: int = 1, config: Config | None = None, fly: FlyConfig | None = None,
                  render_mode: str | None = None, seed: int | None = None):
-        self.fly_config = fly or FlyConfig()
+        self.fly_config = fly or (config.fly if config is not None else FlyConfig())
         super().__init__(num_envs, config, seed, render_mode)
         n, frames = self.num_drones, self.fly_config.frames
         self._define_spaces(n, frames)

@@ -36,7 +36,7 @@ class PlannerVectorEnv(VectorEnvCore):
     Args:
         num_envs: E.
         config: simulator sections (map, fire, wind, ignition, planner drones, sim).
-        planner: the planner level.
+        planner: the planner level (default: ``config.planner``).
         evaluation: explorers move and the candidates come from ``planner.eval_fires`` (else training:
             explorers wait at the groundstation, candidates from ``planner.train_fires``).
         controller: ``"planner"`` (goals from the actions) or ``"greedy"`` (the heuristic; actions ignored).
@@ -56,7 +56,7 @@ class PlannerVectorEnv(VectorEnvCore):
                  render_mode: str | None = None):
         if controller not in CONTROLLERS:
             raise ValueError(f"controller must be one of {', '.join(CONTROLLERS)}, got {controller!r}")
-        self.planner_config = pc = planner or PlannerConfig()
+        self.planner_config = pc = planner or (config.planner if config is not None else PlannerConfig())
         self.controller, self.evaluation = controller, evaluation
         self.default_caption_name = controller
         self.has_reward = controller != "greedy"  # the heuristic's episodes return 0: no reward is computed

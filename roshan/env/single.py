@@ -66,10 +66,9 @@ class _FlyCore:
         """``render_modes``: the front end's; ``shortcuts``: :func:`build_configs`' keywords."""
         _check_render_mode(render_mode, render_modes)
         cfg, task = build_configs(config, fly, **shortcuts)
-        self.vec = FlyVectorEnv(num_envs=1, config=cfg, fly=task, render_mode=render_mode)
         # With rendering on, the vector env keeps the frame of an episode's final state, which render() shows
         # until the next reset (the vector env has already started the next episode by then).
-        self.vec.keep_final_frame = render_mode is not None
+        self.vec = FlyVectorEnv(num_envs=1, config=cfg, fly=task, render_mode=render_mode)
         self.num_drones = self.vec.num_drones
         self._obs: dict | None = None  # the vector env's live observation views (None before the first reset)
         self.ended = False  # the last step ended the episode; the vector env has already started the next one

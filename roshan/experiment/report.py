@@ -16,9 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from roshan.experiment.findings import findings_markdown
-from roshan.experiment.runner import RESULT_ATTR, run_key
-from roshan.experiment.spec import Condition, Reference, Spec
+from roshan.experiment.runner import RESULT_ATTR, experiment_dir, load_experiment, progress, run_key, spec_storage
+from roshan.experiment.spec import Condition, Reference, Spec, load_spec
 from roshan.io import write_atomic, writing
+from roshan.study.storage import open_storage
 
 RATES = ("success", "collision", "boundary", "timeout", "burnout")
 
@@ -254,3 +255,23 @@ def write_report(spec: Spec, study, out_dir: str | Path) -> list[dict]:
         plot(spec, rows, out / "success.png")
     return rows
 
+
+
+def report_experiment(spec_path: str | Path, budget: str, storage: str | None, root: str | Path,
+                      out_dir: str | Path | None) -> str:
+    """``roshan experiment report``: the report of SPEC's finished runs read from its journal (``storage``, else
+    the spec's, else ROOT/NAME/experiment.journal), written to ``out_dir`` (default ROOT/NAME/report); returns what
+    the command prints: the runs' progress, the tables and the files written."""
+    spec = load_spec(spec_path, budget)
+    url = spec_storage(spec, root, storage)
+    if "://" not in url and not Path(url).is_file():
+        raise FileNotFoundError(f"{url}: no experiment journal; run `roshan experiment run {spec_path}` first "
+                                "(or give --storage / --root)")
+    study = load_experiment(open_storage(url, heartbeat=None, repair=False), spec.name)
+    out = Path(out_dir) if out_dir else experiment_dir(root, spec.name) / "report"
+    rows = write_report(spec, study, out)
+    p = progress(study, set(spec.fingerprints()))
+    return "\n".join([
+        f"experiment {spec.name}: {p['done']}/{len(spec.runs())} runs done, {p['running']} running, "
+        f"{p['waiting']} waiting" + (f", {p['failed']} failed" if p["failed"] else ""),
+        markdown(spec, rows), f"wrote {out}/report.md, per_seed.csv, summary.json, runs/, success.png"])

@@ -257,6 +257,19 @@ class FireSim:
         self._clear_envs(mask)
         self._start_envs(mask, self.seed_key)
 
+    def restart_streams(self, seed: int) -> None:
+        """Restart every random stream from ``seed``: the next reset starts episode 0 of each env again."""
+        self.seed = int(seed)
+        self.episode.fill(-1)
+
+    def relabel(self, land: LandCoverMap) -> None:
+        """Report ``land`` as this simulator's map: a map of the same contents under another name or
+        georeferencing (a pooled simulator's new owner), which changes no field."""
+        if land.classes.shape != self.land_map.classes.shape:
+            raise ValueError(f"{land.name}: {land.classes.shape} cells, but this simulator was built for "
+                             f"{self.land_map.name}'s {self.land_map.classes.shape}")
+        self.land_map = land
+
     @property
     def seed_key(self) -> int:
         """The root key of every random stream (a hash of the seed)."""

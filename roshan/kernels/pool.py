@@ -9,8 +9,8 @@ to its freshly constructed values, so its trajectories are bit-identical to thos
 
 The build key is everything that decides field shapes and compile-time constants: map contents, the config
 sections the simulators read, the number of envs and, for the planner, its level settings and the policies'
-frame counts. The seed is not part of it (it is a kernel argument). :func:`roshan.runtime.reset_taichi` empties
-the pool, since its objects die with the Taichi runtime.
+frame counts. The seed is not part of it (it is a kernel argument). The pool belongs to the Taichi runtime
+(:func:`roshan.runtime.for_this_runtime`): a reset starts a new, empty one, since the objects die with the runtime.
 """
 
 import hashlib
@@ -34,7 +34,7 @@ from roshan.kernels.render import EnvZeroFrames
 from roshan.kernels.rewards import PlannerCoefficients
 from roshan.maps import LandCoverMap
 from roshan.memory import check_fits, format_bytes
-from roshan.runtime import current_arch, ensure_taichi, on_taichi_reset
+from roshan.runtime import current_arch, ensure_taichi, for_this_runtime
 
 # ---------------------------------------------------------------------------------------------- bundles
 
@@ -120,7 +120,8 @@ def take_fly_sims(land: LandCoverMap, cfg: Config, fly: FlyConfig, num_envs: int
                            cfg.ignition.fire_percentage, fly)
         return FlySims(fire, drones, FlyKernels(fire, drones, fly, t_max), EnvZeroFrames(drones), t_max)
 
-    return _take(key, build, lambda: fly_estimate(land, cfg, num_envs), extra_bytes, who, land, seed, owner)
+    return current_pool().take(key, build, lambda: fly_estimate(land, cfg, num_envs), extra_bytes, who, land, seed,
+                               owner)
 
 
 def take_planner_sims(land: LandCoverMap, cfg: Config, pc: PlannerConfig, num_envs: int, seed: int, *,
@@ -156,7 +157,8 @@ def take_planner_sims(land: LandCoverMap, cfg: Config, pc: PlannerConfig, num_en
         viewer = EnvZeroFrames(drones, explorers, maps.fire_map)
         return PlannerSims(fire, drones, explorers, maps, kernels, viewer, t_max, max_candidates)
 
-    return _take(key, build, lambda: planner_estimate(land, cfg, pc, num_envs), extra_bytes, who, land, seed, owner)
+    return current_pool().take(key, build, lambda: planner_estimate(land, cfg, pc, num_envs), extra_bytes, who, land,
+                               seed, owner)
 
 
 def land_key(land: LandCoverMap) -> tuple:
@@ -201,53 +203,51 @@ class _Entry:
     pristine: Pristine
 
 
-# Free bundles per build key, and a generation number that reset_taichi() bumps so bundles of a dead runtime
-# are never handed out (their give-back calls may still run later).
-_free: dict[tuple, list[_Entry]] = {}
-_generation = [0]
+class SimulatorPool:
+    """The free bundles of one Taichi runtime, per build key. A bundle given back after its runtime was reset
+    goes to that runtime's pool, which nobody asks any more."""
+
+    def __init__(self):
+        self.free: dict[tuple, list[_Entry]] = {}
+
+    def take(self, key: tuple, build: Callable[[], FlySims | PlannerSims], estimate: Callable[[], Estimate],
+             extra_bytes: int, who: str, land: LandCoverMap, seed: int,
+             owner: object) -> tuple[FlySims | PlannerSims, Callable[[], None]]:
+        free = self.free.get(key)
+        if free:
+            check_fits(who, extra_bytes, ["fewer envs (--envs / sim.envs)"], current_arch())
+            entry = free.pop()
+            entry.pristine.restore()
+        else:
+            est = estimate()
+            need = est.bytes + extra_bytes
+            z = est.fire
+            check_fits(f"{who}: {z.describe(land.name)}, about {format_bytes(need / z.num_envs)} per env,", need,
+                       [*z.ways_out(), *est.ways_out], current_arch())
+            sims = build()
+            entry = _Entry(sims, Pristine(_simulators(sims)))
+        entry.sims.fire.restart_streams(seed)
+        entry.sims.fire.relabel(land)  # same contents; keep the caller's name and georeferencing
+        give_back = weakref.finalize(owner, self.give_back, key, entry)
+        give_back.atexit = False  # nothing to return at interpreter exit
+        return entry.sims, give_back
+
+    def give_back(self, key: tuple, entry: _Entry) -> None:
+        self.free.setdefault(key, []).append(entry)
+
+    def count(self) -> int:
+        return sum(len(v) for v in self.free.values())
 
 
-def _take(key: tuple, build: Callable[[], FlySims | PlannerSims], estimate: Callable[[], Estimate],
-          extra_bytes: int, who: str, land: LandCoverMap, seed: int,
-          owner: object) -> tuple[FlySims | PlannerSims, Callable[[], None]]:
+def current_pool() -> SimulatorPool:
+    """The pool of the current Taichi runtime."""
     ensure_taichi()
-    free = _free.get(key)
-    if free:
-        check_fits(who, extra_bytes, ["fewer envs (--envs / sim.envs)"], current_arch())
-        entry = free.pop()
-        entry.pristine.restore()
-    else:
-        est = estimate()
-        need = est.bytes + extra_bytes
-        z = est.fire
-        check_fits(f"{who}: {z.describe(land.name)}, about {format_bytes(need / z.num_envs)} per env,", need,
-                   [*z.ways_out(), *est.ways_out], current_arch())
-        sims = build()
-        entry = _Entry(sims, Pristine(_simulators(sims)))
-    entry.sims.fire.seed = int(seed)
-    entry.sims.fire.land_map = land  # same contents; keep the caller's name and georeferencing
-    give_back = weakref.finalize(owner, _give_back, key, entry, _generation[0])
-    give_back.atexit = False  # nothing to return at interpreter exit
-    return entry.sims, give_back
-
-
-def _give_back(key: tuple, entry: _Entry, generation: int) -> None:
-    if generation == _generation[0]:
-        _free.setdefault(key, []).append(entry)
-
-
-def clear() -> None:
-    """Forget every pooled bundle (their fields are gone after ``ti.reset()``)."""
-    _free.clear()
-    _generation[0] += 1
+    return for_this_runtime("simulator pool", SimulatorPool)
 
 
 def pooled_count() -> int:
     """Bundles waiting in the pool (tests)."""
-    return sum(len(v) for v in _free.values())
-
-
-on_taichi_reset(clear)
+    return current_pool().count()
 
 
 def _simulators(sims: FlySims | PlannerSims) -> list[object]:

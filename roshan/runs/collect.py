@@ -61,8 +61,8 @@ class EnvRows:
 
 
 def level_rows(cfg: Config) -> DroneRows | EnvRows:
-    """The row adapter of ``train.algo``: ppo trains FlyAgents, planner the PlannerAgent."""
-    return EnvRows() if cfg.train.algo == "planner" else DroneRows(cfg.drones.num_drones)
+    """The row adapter of the run's level: a row per drone for FlyAgents, per env for the planner."""
+    return DroneRows(cfg.drones.num_drones) if cfg.train.level.flies else EnvRows()
 
 
 def rollout_steps(cfg: Config, rows: DroneRows | EnvRows | None = None) -> int:

@@ -8,12 +8,15 @@ from roshan.env.fly import FlyVectorEnv
 from roshan.env.planner import PlannerVectorEnv
 
 
-def make_env(cfg: Config, num_envs: int, seed: int, evaluation: bool = False, controller: str = "planner"):
+def make_env(cfg: Config, num_envs: int, seed: int, evaluation: bool = False, controller: str = "planner",
+             render_mode: str | None = None):
     """The run's vector env: FlyAgent, or planner (``evaluation``: explorers fly and the candidates are the
-    detected fires; ``controller="greedy"``: the heuristic baseline)."""
-    if cfg.train.algo == "planner":
-        return PlannerVectorEnv(num_envs, cfg, cfg.planner, evaluation=evaluation, controller=controller, seed=seed)
-    return FlyVectorEnv(num_envs=num_envs, config=cfg, fly=cfg.fly, seed=seed)
+    detected fires; ``controller="greedy"``: the heuristic baseline). ``render_mode="rgb_array"``: frames,
+    with env 0's final frame of each episode kept."""
+    if cfg.train.level.flies:
+        return FlyVectorEnv(num_envs=num_envs, config=cfg, seed=seed, render_mode=render_mode)
+    return PlannerVectorEnv(num_envs, cfg, evaluation=evaluation, controller=controller, seed=seed,
+                            render_mode=render_mode)
 
 
 def caption_name(level: str, run_dir: Path) -> str:

@@ -20,7 +20,7 @@ from roshan.algos.buffers import ReplayBuffer
 from roshan.algos.frozen import check_setting, load_agent, policy_fn
 from roshan.algos.networks import flatten_drones
 from roshan.checkpoints import folder_lock, resolve_checkpoint
-from roshan.config import Config, apply_overrides
+from roshan.config import PLANNER, Config, apply_overrides
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import straight_to_goal
 from roshan.episode import EPISODE_FIELDS, FIRE_FIELDS, REASONS, RECORD_FIELDS
@@ -46,7 +46,8 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
     fractions of the map's cells and extinguished (cells); env, index.
     ``on_step(obs, actions, rewards, terms, truncs, info)`` is called after every step (buffer recording).
     With ``frames_dir`` the frames of env 0's first episode are written there: frame 0 is the state right after
-    the reset and the last frame the episode's final state (rendered before the same-step autoreset).
+    the reset and the last frame the episode's final state (which an env built with ``render_mode="rgb_array"``
+    renders before the same-step autoreset).
 
     The progress bar counts episodes, and on a terminal moves with the steps too: each env's running episode adds
     the fraction of its step limit it has used (capped below one), so a batch of long episodes does not sit at 0.
@@ -59,7 +60,9 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
     rows: list[list] = [[] for _ in range(E)]
     frame = 0
     if frames_dir is not None:
-        env.keep_final_frame = True
+        if env.render_mode is None:
+            raise ValueError(f"frames_dir={str(frames_dir)!r}: this env was built without render_mode='rgb_array', "
+                             "so it keeps no episode's final frame; build it with render_mode='rgb_array'")
         _save_frame(env.render(), frames_dir, frame)
         frame += 1
     # On a terminal the bar moves with the running episodes too (4.7/8); without one (a log file, CI) every line it
@@ -81,7 +84,6 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
             env_zero_ended = bool(ended[0])
             _save_frame(env.final_frame if env_zero_ended else env.render(), frames_dir, frame)
             frame += 1
-            env.keep_final_frame = not env_zero_ended
         if bool(ended.any()):
             stats = torch.stack([info["episode_stats"][k] for k in EPISODE_FIELDS]
                                 + [info["episode_fire"][k] for k in FIRE_FIELDS], dim=-1).cpu().numpy()
@@ -94,7 +96,6 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
             steps[ended.cpu()] = 0
             _advance_bar(bar, done_count, steps if fractional else torch.zeros_like(steps), quota, t_max)
     bar.close()
-    env.keep_final_frame = False
     kept = [(e, i, r) for e in range(E) for i, r in enumerate(rows[e])][:episodes]
     col = lambda name: np.array([r[RECORD_FIELDS.index(name)] for _, _, r in kept])  # noqa: E731
     out = {"reward": col("return"), "time": col("steps").astype(int), "success": col("success").astype(int),
@@ -140,7 +141,7 @@ def baseline_name(baseline: str, cfg: Config, planner: bool) -> tuple[str, str]:
         return f"greedy ({home})", f"greedy ({home}), planner.greedy_home = {home}: {GREEDY_HOME_NOTES[home]}"
     return baseline, ""
 # Where training and evaluation differ by design, the learning curves say why.
-TRAINING_NOTES = {"planner": "Training episodes (Episodes/*) sample goals from the stochastic policy with the "
+TRAINING_NOTES = {PLANNER.name: "Training episodes (Episodes/*) sample goals from the stochastic policy with the "
                              "explorers at the groundstation, and time out: success 0 by design. Evaluation "
                              "(Evaluation/*) takes the argmax goal with the explorers flying."}
 
@@ -309,14 +310,14 @@ def _write_outputs(episodes: dict, out_dir: Path, title: str, provenance, reason
     return summary
 
 
-def write_learning_curves(run_dir: Path, path: Path, title: str, algo: str, say=_quiet) -> None:
+def write_learning_curves(run_dir: Path, path: Path, title: str, level: str, say=_quiet) -> None:
     """The run's learning curves from its TensorBoard events (nothing where it has none), with the note of
     ``TRAINING_NOTES`` where training and evaluation differ by design."""
     tb = run_dir / "tb"
     scalars = read_tensorboard_scalars(tb) if tb.is_dir() else {}
     if scalars:
         say(f"writing learning curves to {path}")
-        plot_learning_curves(scalars, path, title=title, note=TRAINING_NOTES.get(algo))
+        plot_learning_curves(scalars, path, title=title, note=TRAINING_NOTES.get(level))
 
 
 def flyagent_json(summary: dict, reasons: tuple[str, ...] = ("collision", "boundary", "timeout")) -> dict:
@@ -362,15 +363,16 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
     with output_lock(out):  # held until the last file is written: a second evaluation here is refused
         prepare_outputs(out, json_path, frames_dir, gif_path, replace)
         provenance = _provenance(target, path, which, seed, episodes, E, overrides, baseline, arch)
-        env = make_env(cfg, E, seed, evaluation=True)
-        env.caption_name = caption_name(env.default_caption_name, run_dir)
         scratch = None
         if gif_path is not None and frames_dir is None:  # frames only for the GIF: a scratch folder, removed after
             scratch = tempfile.TemporaryDirectory(prefix="roshan_frames_")
             frames_dir = Path(scratch.name)
+        env = make_env(cfg, E, seed, evaluation=True, render_mode=None if frames_dir is None else "rgb_array")
+        env.caption_name = caption_name(env.default_caption_name, run_dir)
         eps = run_episodes(env, policy_fn(agent), episodes, seed, frames_dir, progress_bar)
         base_eps = None
-        if baseline is not None and not env.flat_drones:  # the planner's baselines: greedy, random
+        planner = not cfg.train.level.flies
+        if baseline is not None and planner:  # the planner's baselines: greedy, random
             if baseline not in BASELINES:
                 raise ValueError(f"--baseline: expected one of {', '.join(BASELINES)}, got {baseline!r}")
             # The heuristic runs in its own env with the same seed and env count: identical fire layouts and wind.
@@ -385,10 +387,10 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         who, reasons, dt = f"{cfg.train.algo} policy", env.failure_reasons, cfg.fire.dt
         summary = write_outputs(eps, out, f"{run_dir.name} ({path.stem}, {len(eps['time'])} episodes, seed {seed})",
                                 provenance, reasons, dt, who, say)
-        write_learning_curves(run_dir, out / "learning_curves.png", f"{run_dir.name}: {who}", cfg.train.algo, say)
+        write_learning_curves(run_dir, out / "learning_curves.png", f"{run_dir.name}: {who}", cfg.train.level.name, say)
         payload = flyagent_json(summary, env.failure_reasons)
         if base_eps is not None:
-            name, note = baseline_name(baseline, cfg, not env.flat_drones)
+            name, note = baseline_name(baseline, cfg, planner)
             base = write_outputs(base_eps, out / baseline, f"{name} baseline ({len(base_eps['time'])} episodes, "
                                                              f"seed {seed})", provenance, reasons, dt,
                                f"{name} baseline", say)
@@ -396,7 +398,7 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
             payload = {"policy": payload, baseline: flyagent_json(base, env.failure_reasons)}
             summary["baseline"] = base
             summary["baseline_name"], summary["baseline_note"] = name, note
-            if baseline == "greedy" and not env.flat_drones:
+            if baseline == "greedy" and planner:
                 payload[baseline]["greedy_home"] = cfg.planner.greedy_home
         payload["provenance"] = provenance
         if json_path is not None:
@@ -423,7 +425,7 @@ def save_buffer(target: str | Path, transitions: int, path: Path, seed: int = 0,
     refuse_overwrite(path, "the replay buffer", replace)
     ensure_taichi()
     trained, agent, ckpt = load_agent(target, which, torch_device())
-    if trained.train.algo == "planner":
+    if not trained.train.level.flies:
         raise ValueError(f"{ckpt}: a planner checkpoint; replay buffers record FlyAgent transitions (--save-buffer "
                          "needs a FlyAgent run)")
     cfg = apply_overrides(trained, overrides) if overrides else trained

@@ -25,6 +25,8 @@ class PPOLearner:
     """One iteration = a rollout of ``ppo.horizon`` transitions, then one PPO update. Steps count env steps
     (planner: decisions, each ``planner.interval`` low-level steps of every env)."""
 
+    counts_env_steps = True  # train.total_steps is a budget of env steps (IQL's offline updates take none)
+
     def __init__(self, cfg: Config, env, agent: PPO):
         self.rows = level_rows(cfg)
         self.steps = rollout_steps(cfg, self.rows)
@@ -62,6 +64,7 @@ class TD3Learner:
     """One iteration = ``env_steps_per_iteration`` env steps, each followed by one TD3 update call (k_epochs
     gradient iterations) once the buffer holds ``min_memory_size`` transitions (docs/model/learning.md §7)."""
 
+    counts_env_steps = True
     env_steps_per_iteration = 64
 
     def __init__(self, cfg: Config, env: FlyVectorEnv, agent):
@@ -94,6 +97,8 @@ class IQLLearner:
     """Iterations 1..offline_updates: one pass each over the saved dataset (no env steps); then, if
     ``online_updates`` > 0, one iteration = ``policy_freq`` env steps with the IQL actor appended to the
     buffer, then one update of ``k_epochs`` minibatches (docs/model/learning.md §8)."""
+
+    counts_env_steps = False  # its progress bar counts updates: the offline ones take no env step
 
     def __init__(self, cfg: Config, env: FlyVectorEnv, agent):
 

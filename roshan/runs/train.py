@@ -34,11 +34,10 @@ from roshan.checkpoints import (
 )
 from roshan.config import Config, dump_config
 from roshan.io import OutputError, prepare_output, writing
-from roshan.runs.collect import rollout_steps
 from roshan.runs.envs import make_env
 from roshan.runs.episode_log import EpisodeLog
 from roshan.runs.evaluate import TRAINING_NOTES, evaluate_run, run_episodes
-from roshan.runs.learners import make_learner
+from roshan.runs.learners import check_learnable, make_learner
 from roshan.runs.report.stats import evaluation_scalars, summarize
 from roshan.runs.resume import resume_config, resume_state  # noqa: F401  (resume_config: cli's name)
 from roshan.runs.tboard import EpisodeFrames, add_config, add_hparams, add_video, log_episodes, log_update
@@ -75,8 +74,7 @@ class Trainer:
         self.resumed_from = resumed_from or checkpoint_path(run_dir, "latest")  # the file resume_state came from
         self.progress_bar, self.on_update = progress_bar, on_update
         tc = cfg.train
-        if tc.algo in ("ppo", "planner"):
-            rollout_steps(cfg)  # check the horizon before building anything
+        check_learnable(cfg)  # e.g. a PPO horizon that does not split over the rows: before anything is built
         self.generator = torch.Generator().manual_seed(cfg.sim.seed)
         torch.manual_seed(cfg.sim.seed)
         self.agent = make_agent(cfg, torch_device())
@@ -111,8 +109,9 @@ class Trainer:
             writer.add_text("Run/resumed", f"resumed at update {self.progress.updates} ({self.progress.env_steps:,} "
                                            f"env steps): `{shlex.join(sys.argv)}`", self.log_step)
         add_config(writer, config_dict(self.cfg), self.log_step)
-        if self.cfg.train.algo in TRAINING_NOTES:
-            writer.add_text("Run/note", TRAINING_NOTES[self.cfg.train.algo], self.log_step)
+        note = TRAINING_NOTES.get(self.cfg.train.level.name)
+        if note is not None:
+            writer.add_text("Run/note", note, self.log_step)
         return writer
 
     def _final_metrics(self) -> dict[str, float]:
@@ -173,7 +172,7 @@ class Trainer:
 
     def _bar(self):
         tc = self.cfg.train
-        total = tc.total_steps if tc.total_steps and tc.algo != "iql" else None
+        total = tc.total_steps if tc.total_steps and self.learner.counts_env_steps else None
         return tqdm(total=total, initial=self.progress.env_steps if total else self.progress.updates,
                     unit="step" if total else "update", dynamic_ncols=True,
                     disable=not self.progress_bar, desc=self.run_dir.name)

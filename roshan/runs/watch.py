@@ -56,9 +56,8 @@ def watch(target: str | Path, steps: int | None = None, seed: int = 0, which: st
     cfg = apply_overrides(trained, overrides) if overrides else trained
     check_setting(trained, cfg, path)
     run_dir = path.parent.parent if path.parent.name == "checkpoints" else path.parent
-    env = make_env(cfg, 1, seed, evaluation=True)
+    env = make_env(cfg, 1, seed, evaluation=True, render_mode="rgb_array")  # it keeps each episode's final frame
     env.caption_name = caption_name(env.default_caption_name, run_dir)
-    env.keep_final_frame = True
     try:
         obs, _ = env.reset(seed=seed)
         first = env.render()

@@ -10,7 +10,7 @@ from pathlib import Path
 import optuna
 
 from roshan.config import Config, from_dict, load_run_config, to_dict
-from roshan.runs.collect import rollout_steps
+from roshan.runs.learners import check_learnable
 from roshan.study.errors import StudyError
 from roshan.study.space import SearchSpace, load_space, parse_space
 
@@ -48,8 +48,7 @@ def make_recipe(config_path: str | Path | None, overrides: list[str] | tuple[str
     """Load and validate the base config and the search space; ``settings`` are :class:`Recipe` fields (None =
     default)."""
     base = load_run_config(config_path, overrides)
-    if base.train.algo == "ppo":  # a base config every trial would fail with is an error now, not N failures later
-        rollout_steps(base)
+    check_learnable(base)  # a base config every trial would fail with is an error now, not N failures later
     space = load_space(space_path, base)
     fields = {k: v for k, v in settings.items() if v is not None}
     if fields.get("objective", "success") not in OBJECTIVES:

@@ -272,6 +272,30 @@ FOOTPRINT_HEADER = (f"{'map':<16}{'cells':>9}{'ign':>7}{'layout':>8}{'MiB/env':>
                     f"{'dropped':>9}{'clear ms':>10}{'fires ms':>10}")
 
 
+def memory_report(steps: int, rss_envs: int, rss_steps: int, arch: str, threads: int | None, echo=print) -> dict:
+    """``roshan bench memory``: the fire footprint per env and the reset cost of each layout on 35x36_Woods,
+    Borkenberge and the 941k-cell tiled map (sparse and dense where ``auto`` would pick sparse for many envs), a
+    line ``echo``-ed per run; with ``rss_envs``, the peak RSS of that many envs of the big map in a fresh
+    process."""
+    rows = []
+    echo(FOOTPRINT_HEADER)
+    for land in (load_map("35x36_Woods"), load_map("Borkenberge"), tiled_map()):
+        for pct, n, episodes in ((0.015, steps, 3), (0.35, max(1, steps // 10), 1)):
+            big = land.rows * land.cols > 100_000 and pct < 0.1  # where auto picks sparse for many envs
+            for layout in ("sparse", "dense") if big else ("auto",):
+                r = fire_footprint(land, pct, n, layout, episodes)
+                rows.append(r)
+                echo(format_footprint_row(r))
+    report = {"arch": arch, "threads": threads, "runs": rows}
+    if rss_envs:
+        report["rss"] = rss = big_map_rss(rss_envs, rss_steps, arch, threads)
+        echo(f"{rss_envs} envs of the 941k-cell map ({rss['layout']}), {rss_steps} updates: peak RSS "
+             f"{rss['max_rss_bytes'] / 2**30:.2f} GiB ({rss['start_rss_bytes'] / 2**30:.2f} GiB before the "
+             f"simulator, whose fields were estimated at {rss['estimate_bytes'] / 2**30:.2f} GiB), dropped "
+             f"blocks {rss['dropped_blocks']}")
+    return report
+
+
 def format_footprint_row(r: dict) -> str:
     used = f"{r['peak_blocks']}/{r['block_capacity']}" if r["layout"] == "sparse" else "-"
     return (f"{r['map']:<16}{r['cells']:>9}{r['fire_percentage'] * 100:>6.1f}%{r['layout']:>8}"

@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 from PIL import Image
 
@@ -99,3 +100,18 @@ def test_bench_env_runs_on_a_tiny_budget(tmp_path):
     # each row is printed (stderr) as its run finishes, not only in the table at the end
     assert "timing 3 runs" in r.stderr and len([line for line in r.stderr.splitlines() if "%" in line]) == 3
     assert all(run["env_steps_per_s"] > 0 and run["agent_steps_per_s"] == 2 * run["env_steps_per_s"] for run in runs)
+
+
+@pytest.mark.parametrize("args, message", [
+    (("bench", "fire", "--envs", "0", "--steps", "10"), "Invalid value for --envs: expected comma-separated int "
+                                                         "values from 1, got '0'"),
+    (("bench", "fire", "--envs", "2,x", "--steps", "10"), "got '2,x'"),
+    (("bench", "env", "--envs", "1", "--fire", "1.5"), "Invalid value for --fire: expected comma-separated float "
+                                                        "values from 0.0 to 1.0, got '1.5'"),
+    (("simulate", "--steps", "1", "--gif", "out.png"), "'out.png' does not end in .gif"),
+])
+def test_bad_lists_and_gif_names_are_usage_errors_before_any_work(args, message, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    r = CliRunner().invoke(main, list(args))
+    assert r.exit_code == 2 and message in r.output and "Traceback" not in r.output
+    assert not list(tmp_path.iterdir())  # nothing written

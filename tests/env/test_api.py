@@ -148,3 +148,14 @@ def test_an_env_says_how_many_steps_an_episode_may_last():
     env = FlyVectorEnv(1, Config(), FlyConfig(frame_skips=3))
     assert env.physics_steps_per_step == 3 and env.max_env_steps == math.ceil(env.t_max / 3)
     env.close()
+
+
+def test_an_env_takes_its_task_section_from_the_config_unless_given_one():
+    from roshan.config import FlyConfig
+
+    env = FlyVectorEnv(1, Config(drones=DroneConfig(num_drones=N), fly=FlyConfig(frames=2)))
+    assert env.fly_config.frames == 2 and env.observation_space["agent"].shape[2] == 2
+    env.close()
+    env = FlyVectorEnv(1, Config(drones=DroneConfig(num_drones=N), fly=FlyConfig(frames=2)), FlyConfig(frames=4))
+    assert env.fly_config.frames == 4
+    env.close()

@@ -222,3 +222,11 @@ def test_greedy_fire_on_the_groundstation_cell_is_put_out_only_with_the_fix(home
 def test_a_planner_step_counts_interval_physics_steps():
     env = make_env(interval=4)
     assert env.physics_steps_per_step == 4 and env.max_env_steps == -(-env.t_max // 4)
+
+
+def test_the_planner_env_takes_its_section_from_the_config_unless_given_one():
+    pc = PlannerConfig(interval=3, fly_model=MODEL, explorer_model=MODEL, num_explorers=1)
+    cfg = Config(ignition=FIRES, drones=DroneConfig(num_drones=2), planner=pc)
+    env = PlannerVectorEnv(1, cfg, controller="greedy")
+    assert env.planner_config is pc and env.physics_steps_per_step == 3
+    env.close()

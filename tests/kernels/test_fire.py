@@ -230,3 +230,27 @@ def test_cell_durations_are_the_same_whenever_they_are_drawn():
     lazy.reset()
     _, timers_next = lazy.cell_records()
     assert np.mean(timers_next[..., T_BURN_LEFT] != timers_eager[..., T_BURN_LEFT]) > 0.5, "a new episode redraws"
+
+
+def test_a_simulator_whose_streams_restart_replays_a_fresh_one_with_that_seed():
+    land = make_map(np.full((8, 8), 2))
+    ignition = IgnitionConfig(fire_percentage=0.1, pattern="scattered")
+    fresh = FireSim(land, ignition=ignition, num_envs=2, seed=5)
+    fresh.reset()
+    used = FireSim(land, ignition=ignition, num_envs=2, seed=1)
+    for _ in range(3):  # episodes under another seed, then the new owner's seed
+        used.reset()
+        used.step(5)
+    used.restart_streams(5)
+    used.reset()
+    np.testing.assert_array_equal(used.states(), fresh.states())
+    np.testing.assert_array_equal(used.step(20), fresh.step(20))
+
+
+def test_relabel_takes_a_map_of_the_same_shape_only():
+    sim = FireSim(make_map(np.full((4, 4), 2)), ignition=IgnitionConfig(fire_percentage=0.0))
+    renamed = make_map(np.full((4, 4), 2))
+    sim.relabel(renamed)
+    assert sim.land_map is renamed
+    with pytest.raises(ValueError, match=r"\(5, 4\) cells, but this simulator was built for .*\(4, 4\)"):
+        sim.relabel(make_map(np.full((5, 4), 2)))

@@ -18,18 +18,18 @@ CFG = Config(map=MapConfig(name="15x15_Woods"), ignition=IgnitionConfig(fire_per
 SEED = 4
 
 
-def make_fly():
-    return FlyVectorEnv(num_envs=2, config=CFG, seed=SEED)
+def make_fly(render_mode="rgb_array"):
+    return FlyVectorEnv(num_envs=2, config=CFG, seed=SEED, render_mode=render_mode)
 
 
 def make_greedy():
     pc = PlannerConfig(fly_model=MODEL, explorer_model=MODEL, num_explorers=2)
-    return PlannerVectorEnv(2, CFG, pc, evaluation=True, controller="greedy", seed=SEED)
+    return PlannerVectorEnv(2, CFG, pc, evaluation=True, controller="greedy", seed=SEED, render_mode="rgb_array")
 
 
 def make_planner():
     pc = PlannerConfig(fly_model=MODEL, explorer_model=MODEL, num_explorers=2)
-    return PlannerVectorEnv(2, CFG, pc, evaluation=True, controller="planner", seed=SEED)
+    return PlannerVectorEnv(2, CFG, pc, evaluation=True, controller="planner", seed=SEED, render_mode="rgb_array")
 
 
 def greedy_fly(obs):
@@ -86,10 +86,13 @@ def test_frames_run_from_the_reset_to_the_final_state_of_one_episode(make, act, 
         assert len(frames) == record["steps"] + 1  # FlyAgent steps are physics steps (frame_skips = 1)
 
 
-def test_no_frames_no_final_frame():
-    env = make_fly()
+def test_no_render_mode_no_final_frame_and_no_frames(tmp_path):
+    env = make_fly(render_mode=None)
     env.reset(seed=SEED)
     for _ in range(3):
         env.step(np.zeros((2, 2, 2), np.float32))
-    assert env.final_frame is None and not env.keep_final_frame
+    assert env.final_frame is None
+    with pytest.raises(ValueError, match="built without render_mode='rgb_array'"):
+        run_episodes(env, greedy_fly, 2, SEED, frames_dir=tmp_path)
+    assert not list(tmp_path.iterdir())  # refused before the first frame
     env.close()
