@@ -264,3 +264,11 @@ def test_relative_and_submodule_imports_resolve(tmp_path):
                    "pkg.a": [("pkg.sub", True), ("pkg.sub.b", False), ("pkg.sub.b", False)],
                    "pkg.sub": [("pkg.a", False)],
                    "pkg.sub.b": [("pkg.a", False), ("pkg.sub", False)]}
+
+
+def test_the_rooms_that_mixed_trades_stay_small():
+    """issue 31: the fire model without its layout policy, cell records and particle passes; the training loop
+    without its learners."""
+    lines = {name: len((REPO / name).read_text().splitlines())
+             for name in ("roshan/kernels/fire.py", "roshan/runs/train.py")}
+    assert lines["roshan/kernels/fire.py"] <= 800 and lines["roshan/runs/train.py"] <= 350, lines

@@ -14,6 +14,7 @@ import taichi as ti
 
 from roshan.config import DroneConfig
 from roshan.kernels import rng, tasks
+from roshan.kernels.arrays import int32_array
 from roshan.kernels.fire import FireSim
 
 BIN = 0.05  # action resolution with use_vel_bins: 41 levels in [-1, 1]
@@ -92,7 +93,7 @@ class DroneSim:
 
     def reset(self, mask=None) -> None:
         """Place the groundstation and the drones of the masked envs (call after the fire's reset)."""
-        mask = self._all if mask is None else FireSim.int32_array(mask, (self.num_envs,), "reset mask")
+        mask = self._all if mask is None else int32_array(mask, (self.num_envs,), "reset mask")
         self._reset(mask)
 
     def move(self, actions) -> None:

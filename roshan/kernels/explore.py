@@ -10,6 +10,7 @@ import math
 import numpy as np
 import taichi as ti
 
+from roshan.kernels.arrays import int32_array
 from roshan.kernels.drones import DroneSim
 from roshan.kernels.fire import FireSim
 
@@ -209,7 +210,7 @@ class ExploreMaps:
 
     def reset(self, mask=None) -> None:
         """Clear the fire map and restart the meander in the masked envs (after the explorers' reset)."""
-        mask = self._all if mask is None else FireSim.int32_array(mask, (self.num_envs,), "reset mask")
+        mask = self._all if mask is None else int32_array(mask, (self.num_envs,), "reset mask")
         self._reset(mask)
 
     def observe_kernel(self, group: DroneSim | None = None) -> None:

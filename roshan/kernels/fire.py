@@ -30,6 +30,7 @@ import taichi as ti
 from roshan.config import FireConfig, IgnitionConfig, WindConfig
 from roshan.kernels import particles as pt
 from roshan.kernels import rng
+from roshan.kernels.arrays import int32_array
 from roshan.kernels.fire_cells import draw_durations, durations, emission_periods, record_of, reset_record, touch
 from roshan.kernels.fire_layout import (
     TIMER_GROUPS,
@@ -253,7 +254,7 @@ class FireSim:
         and lights the initial fires.
         """
         check_built_in_this_runtime(self._taichi_generation, "FireSim.reset(): this simulator")
-        mask = self._all if mask is None else self.int32_array(mask, (self.num_envs,), "reset mask")
+        mask = self._all if mask is None else int32_array(mask, (self.num_envs,), "reset mask")
         self._clear_envs(mask)
         self._start_envs(mask, self.seed_key)
 
@@ -294,8 +295,8 @@ class FireSim:
             requests: (E, M) int32 flat cell indices ``i * cols + j``; negative entries are ignored.
             extinguished: (E, M) int32 output, 1 where the cell was burning (and is now flooded), else 0.
         """
-        requests = self.int32_array(requests, (self.num_envs, None), "flood requests")
-        self._flood(requests, self.int32_array(extinguished, requests.shape, "flood output", copy_ok=False))
+        requests = int32_array(requests, (self.num_envs, None), "flood requests")
+        self._flood(requests, int32_array(extinguished, requests.shape, "flood output", copy_ok=False))
 
     def counters(self) -> np.ndarray:
         """Every env's counters now, (E, N_COUNTS) (columns: :data:`STAT_NAMES`), in one launch (a field's
@@ -361,26 +362,11 @@ class FireSim:
     # Test hooks: drive the cell state machine directly, without particles or the generator.
     def ignite_cells(self, mask) -> None:
         """Ignite the cells where ``mask`` (E, rows*cols int32) is non-zero and that can ignite."""
-        self._ignite_cells(self.int32_array(mask, (self.num_envs, self.num_cells), "ignition mask"))
+        self._ignite_cells(int32_array(mask, (self.num_envs, self.num_cells), "ignition mask"))
 
     def prescribe_exposure(self, mask) -> None:
         """Mark cells (E, rows*cols int32 mask) as visited by a particle in the next update."""
-        self._prescribe_exposure(self.int32_array(mask, (self.num_envs, self.num_cells), "exposure mask"))
-
-    @staticmethod
-    def int32_array(x, shape, what, copy_ok=True):
-        """Check an int array's shape; numpy inputs become contiguous int32 (torch tensors must already be).
-
-        Public: the drone and map classes check their reset masks with it too."""
-        got = tuple(x.shape)
-        if len(got) != len(shape) or any(want is not None and g != want for g, want in zip(got, shape, strict=True)):
-            want = tuple("M" if w is None else w for w in shape)
-            raise ValueError(f"{what}: expected shape {want}, got {got}")
-        if isinstance(x, np.ndarray):
-            if not copy_ok and (x.dtype != np.int32 or not x.flags.c_contiguous):
-                raise ValueError(f"{what}: expected a C-contiguous int32 array (written in place)")
-            return np.ascontiguousarray(x, dtype=np.int32)
-        return x
+        self._prescribe_exposure(int32_array(mask, (self.num_envs, self.num_cells), "exposure mask"))
 
     # ------------------------------------------------------------------------------------------ kernels
 

@@ -250,7 +250,7 @@ def test_step_before_reset_is_an_error():
 
 
 def test_one_env_flies_as_env_0_of_a_batch():
-    """E = 1 runs its kernels serially on the calling thread (roshan.kernels.fire.env_loop_serial), a batch
+    """E = 1 runs its kernels serially on the calling thread (roshan.kernels.fire_layout.env_loop_serial), a batch
     through Taichi's thread pool; env 0's trajectory, episode ends and autoresets included, is the same."""
     def rollout(envs):
         env = make_env(num_drones=2, envs=envs, fly=FlyConfig(policy="complex"),
