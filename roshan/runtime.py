@@ -19,6 +19,11 @@ ARCHES = ("cpu", "cuda", "vulkan", "auto")
 # (IEEE) math both CPUs give the same bits (the Xeon's fast_math=False hashes are the ones pinned now). What it
 # costs: BENCHMARKS.md, "Same numbers on every CPU"; tests/test_runtime.py holds the setting.
 FAST_MATH = False
+# Taichi keeps compiled kernels on disk (~/.cache/taichi) and, past 100 MB, evicts the least recently used quarter.
+# This package's kernel variants (maps, frame skips, layouts, network shapes) outgrow that: the test suite wrote
+# more than 100 MB, so it recompiled kernels it had compiled minutes before (a file of env tests took 90 s
+# recompiling and 29 s cached). 1 GiB holds them all; TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES still overrides it.
+OFFLINE_CACHE_BYTES = 1 << 30
 _current: dict[str, object] = {}
 _per_runtime: dict[str, object] = {}  # objects that live as long as the Taichi runtime (for_this_runtime)
 # Bumped whenever the runtime is reset or re-initialised: an object that holds fields compares the number it was
@@ -62,6 +67,8 @@ def init_taichi(arch: str = "cpu", threads: int | None = None, debug: bool = Fal
     kwargs: dict[str, object] = {"debug": debug, "random_seed": 0, "log_level": ti.WARN, "fast_math": FAST_MATH}
     if threads is not None:
         kwargs["cpu_max_num_threads"] = threads
+    if not os.environ.get("TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES"):
+        kwargs["offline_cache_max_size_of_files"] = OFFLINE_CACHE_BYTES
     if _current:  # ti.init re-initialises: every field and kernel of the old runtime dies
         _forget_runtime()
     _plain_source_positions(not debug)

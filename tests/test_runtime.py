@@ -68,6 +68,15 @@ def test_taichi_runs_with_exact_math():
     assert ti.lang.impl.current_cfg().fast_math is False
 
 
+def test_the_kernel_cache_holds_all_of_this_packages_kernels(monkeypatch):
+    """Taichi's default 100 MB disk cache evicts a quarter of itself when full; the suite's kernels outgrow it and
+    were recompiled minutes after they were compiled (issue 31). The runtime raises the limit unless the user sets
+    TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES, which Taichi then reads itself."""
+    monkeypatch.delenv("TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES", raising=False)
+    runtime.init_taichi("cpu")
+    assert ti.lang.impl.current_cfg().offline_cache_max_size_of_files == runtime.OFFLINE_CACHE_BYTES >= 1 << 30
+
+
 def test_float_arithmetic_is_evaluated_as_written():
     """What exact math buys: a kernel's f32 arithmetic rounds as written (numpy's bits), so no CPU's code generator
     may fuse a multiply-add, reassociate a sum or approximate a division. Under fast math LLVM folds
