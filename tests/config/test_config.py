@@ -19,7 +19,7 @@ from roshan.config import (
     load_config,
 )
 
-CONFIGS = Path(__file__).resolve().parent.parent / "configs"
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
 
 def test_defaults_are_the_spec_values():
