@@ -43,6 +43,7 @@ from roshan.config.schema import (
 from roshan.config.sim import (
     ConvectionConfig,
     DroneConfig,
+    EnergyConfig,
     FireConfig,
     IgnitionConfig,
     MapConfig,
@@ -124,7 +125,8 @@ load_run_config = load_config
 __all__ = [
     "ALGO_LEVELS", "CONTROLLERS", "FLY_AGENT", "Level", "PLANNER", "PLANNER_NEWEST_TERMS", "PLANNER_PRESETS",
     "PRESETS", "Config", "ConfigError",
-    "ConvectionConfig", "DroneConfig", "FireConfig", "FlyConfig", "IQLConfig", "IgnitionConfig", "MapConfig",
+    "ConvectionConfig", "DroneConfig", "EnergyConfig", "FireConfig", "FlyConfig", "IQLConfig", "IgnitionConfig",
+    "MapConfig",
     "FLY_ONLY_PPO_KEYS", "OptimConfig", "PPOConfig", "PlannerConfig", "PlannerRewardConfig", "RNDConfig",
     "RadiationConfig", "RewardConfig", "SimConfig", "TD3Config", "TrainConfig", "WindConfig", "all_keys",
     "apply_overrides", "choice", "dump_config", "from_dict", "load_config", "load_run_config", "num", "replace",

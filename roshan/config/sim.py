@@ -87,6 +87,42 @@ class IgnitionConfig(Section):
     reseed: bool = True  # newest code: re-seed a trapped cluster until it has its share; false = thesis era (a maximum)
 
 
+# Energy presets: a battery of ``capacity`` joules drained by P = hover_power + speed_power * |v|^2 (+ payload_power
+# times the tank's fill with the water limit), the multirotor form: induced power at hover plus a parasitic term that
+# grows with airspeed. "scenario" is scaled to 35x36_Woods (a ~100 s episode, 35 s to cross the map): a full battery
+# hovers 40 s, so each drone returns to the groundstation several times an episode. "off" is the original: drones
+# fly forever.
+ENERGY_PRESETS: dict[str, dict[str, float]] = {
+    "scenario": {"capacity": 4000.0, "hover_power": 100.0, "speed_power": 0.25, "payload_power": 20.0,
+                 "swap_time": 3.0},
+}
+
+
+@dataclass(frozen=True)
+class EnergyConfig(Section):
+    """Flight endurance: a preset (off: unlimited, the original) and any of its values overridden here."""
+
+    preset: str = choice("off", ("off", *ENERGY_PRESETS),
+                         doc="off: drones fly forever (the original); scenario: a 40 s battery on 35x36_Woods")
+    capacity: float | None = num(None, 0.0, lo_open=True, doc="battery energy (J)")
+    hover_power: float | None = num(None, 0.0, doc="power drawn hovering with an empty tank (W)")
+    speed_power: float | None = num(None, 0.0, doc="extra power per (m/s)^2 of ground speed (W s^2 / m^2)")
+    payload_power: float | None = num(None, 0.0, doc="extra power with a full tank, scaled by its fill (W; the "
+                                                     "water limit only)")
+    swap_time: float | None = num(None, 0.0, doc="seconds on the groundstation cell to swap in a full battery")
+
+    @property
+    def enabled(self) -> bool:
+        return self.preset != "off"
+
+    def values(self) -> dict[str, float]:
+        """The preset's values with this section's overrides (empty when off)."""
+        if not self.enabled:
+            return {}
+        preset = ENERGY_PRESETS[self.preset]
+        return {k: preset[k] if getattr(self, k) is None else float(getattr(self, k)) for k in preset}
+
+
 @dataclass(frozen=True)
 class DroneConfig(Section):
     """FlyAgent drones (docs/model/agents.md §1, §3, §4, §14): physics, sensing, start layout and water."""
@@ -101,6 +137,7 @@ class DroneConfig(Section):
     use_water_limit: bool = False  # finite tank, newest code (docs/model/agents.md §14); off in the thesis experiments
     water_capacity: float = num(4.0, 0.0, lo_open=True, doc="tank size in drops (one drop puts out one cell)")
     recharge_time: float = num(2.0, 0.0, doc="seconds an empty tank takes to refill at the groundstation")
+    energy: EnergyConfig = field(default_factory=EnergyConfig)
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,5 @@
 """Drone physics on the fire simulator's envs (docs/model/agents.md §3-4, §14): motion, boundary, neighbours, collisions
-and the water tank.
+the water tank and the battery.
 
 Drones live on the second axis of every field, ``(E, N)``. Positions and velocities are in metres and m/s
 along (rows, cols); goals and neighbour offsets are in grid units (metres / cell size), as in the reference.
@@ -59,6 +59,16 @@ class DroneSim:
         self.use_water = cfg.use_water_limit
         self.capacity = cfg.water_capacity
         self.refill_rate = cfg.water_capacity * self.dt / (cfg.recharge_time + 1e-4)  # per step at the station
+        # Energy (issue 33): every use sits behind ti.static(self.use_energy), so with the preset "off" the kernels
+        # are the ones of drones that fly forever. Its fields exist either way (zero when built: the pool restores
+        # them by zeroing), so the memory estimate does not depend on the preset.
+        energy = cfg.energy.values()
+        self.use_energy = cfg.energy.enabled
+        self.battery = energy.get("capacity", 0.0)
+        self.hover_power = energy.get("hover_power", 0.0)
+        self.speed_power = energy.get("speed_power", 0.0)
+        self.payload_power = energy.get("payload_power", 0.0)
+        self.swap_steps = max(1, round(energy.get("swap_time", 0.0) / self.dt))  # steps landed for a full battery
 
         # field_bytes() counts these: keep it in step with them
         self.pos = ti.Vector.field(2, ti.f32, (E, N))
@@ -76,6 +86,12 @@ class DroneSim:
         self.prev_dist = ti.field(ti.f32, (E, N))  # distance to the goal at the previous reward (grid units)
         self.water = ti.field(ti.f32, (E, N))  # drops left in the tank; always full without use_water_limit
         self.refilling = ti.field(ti.i32, (E, N))  # complex policy: flying home because the tank ran empty
+        self.energy = ti.field(ti.f32, (E, N))  # joules left in the battery
+        self.lost = ti.field(ti.i32, (E, N))  # the battery ran empty away from the groundstation: down for the episode
+        self.landed_steps = ti.field(ti.i32, (E, N))  # consecutive steps landed on the groundstation with a battery
+        self.swaps = ti.field(ti.i32, (E, N))  # batteries swapped this episode (returns to the base)
+        self.energy_used = ti.field(ti.f32, (E, N))  # joules drawn this episode
+        self.base_steps = ti.field(ti.i32, (E, N))  # steps spent landed on the groundstation this episode
         self.water.fill(cfg.water_capacity)
         self._all = np.ones(E, dtype=np.int32)
         self._burning = tasks.BurningCells(fire)  # assign_fire_goals' candidates
@@ -85,7 +101,7 @@ class DroneSim:
         """Bytes of the fields (and host arrays) a DroneSim of ``num_envs`` x ``num_drones`` allocates, known before
         it is built; the water tanks, full once built, once more for the pristine copy of the simulator pool."""
         n = num_drones
-        per_drone = 8 + 8 + 4 + 4 + 8 + 4 + 4 + 4 + 4 + 4 + 4 + 4  # pos ... refilling
+        per_drone = 8 + 8 + 4 + 4 + 8 + 4 + 4 + 4 + 4 + 4 + 4 + 4 + 6 * 4  # pos ... refilling, energy ... base_steps
         per_env = n * per_drone + n * n * (16 + 4) + 8 + 4  # + neighbours, their mask, groundstation, _all
         return num_envs * (per_env + 4 * n)
 
@@ -183,9 +199,26 @@ class DroneSim:
             if ti.static(self.use_water):
                 self.water[e, d] = self.capacity
                 self.refilling[e, d] = 0
+            if ti.static(self.use_energy):
+                self.energy[e, d] = self.battery
+                self.lost[e, d] = 0
+                self.landed_steps[e, d] = 0
+                self.swaps[e, d] = 0
+                self.energy_used[e, d] = 0.0
+                self.base_steps[e, d] = 0
 
     @ti.func
     def move_drone(self, e, d, a):
+        """Fly drone d by action a; with a battery, draw its energy, and a lost drone stays where it came down."""
+        if ti.static(self.use_energy):
+            if self.lost[e, d] == 0:
+                self.fly(e, d, a)
+                self.draw_energy(e, d)
+        else:
+            self.fly(e, d, a)
+
+    @ti.func
+    def fly(self, e, d, a):
         """docs/model/agents.md §3.1: bins, velocity or acceleration mode, per-axis clamp, integrate, out-of-area count;
         with the water limit, refill at the groundstation (docs/model/agents.md §14)."""
         a = ti.math.clamp(a, -1.0, 1.0)
@@ -204,6 +237,48 @@ class DroneSim:
             self.out_count[e, d] = 0
         if ti.static(self.use_water):
             self.refill(e, d)
+
+    @ti.func
+    def draw_energy(self, e, d):
+        """On the groundstation cell a drone is landed: it draws nothing, and after ``swap_steps`` steps in a row there
+        with a battery that is not full it gets a full one. Elsewhere it draws P dt with P = hover_power +
+        speed_power |v|^2 + payload_power * fill; a drone whose battery runs empty there is lost: it stops, drops its
+        reserved fire and neither moves nor puts out fires for the rest of the episode."""
+        if self.at_groundstation(e, d) != 0:
+            self.base_steps[e, d] += 1
+            if self.energy[e, d] < self.battery:
+                self.landed_steps[e, d] += 1
+                if self.landed_steps[e, d] >= self.swap_steps:
+                    self.energy[e, d] = self.battery
+                    self.landed_steps[e, d] = 0
+                    self.swaps[e, d] += 1
+        else:
+            self.landed_steps[e, d] = 0
+            v = self.vel[e, d]
+            fill = 1.0  # without the water limit the tank never empties
+            if ti.static(self.use_water):
+                fill = self.water[e, d] / self.capacity
+            drawn = (self.hover_power + self.speed_power * v.dot(v) + self.payload_power * fill) * self.dt
+            self.energy_used[e, d] += ti.min(drawn, self.energy[e, d])
+            self.energy[e, d] -= drawn
+            if self.energy[e, d] <= 0.0:
+                self.energy[e, d] = 0.0
+                self.lost[e, d] = 1
+                self.vel[e, d] = ti.Vector([0.0, 0.0])
+                self.goal_cell[e, d] = -1
+
+    @ti.func
+    def at_groundstation(self, e, d) -> ti.i32:
+        gs = self.groundstation[e]
+        return ti.cast(self.cell_of(e, d) == gs[0] * self.cols + gs[1], ti.i32)
+
+    @ti.func
+    def is_active(self, e, d) -> ti.i32:
+        """1 unless the battery ran empty away from the groundstation."""
+        active = 1
+        if ti.static(self.use_energy):
+            active = 1 - self.lost[e, d]
+        return active
 
     @ti.func
     def refill(self, e, d):
@@ -336,7 +411,7 @@ class DroneSim:
         c = self.cell_of(e, d)
         last = 0
         self.extinguished[e, d] = 0
-        if c >= 0:
+        if c >= 0 and self.is_active(e, d) != 0:
             if self.fire.is_burning(e, c) != 0 and self.has_water(e, d) != 0:
                 if ti.static(self.use_water):
                     self.water[e, d] = ti.max(self.water[e, d] - 1.0, 0.0)

@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import taichi as ti
 
-from roshan.config import CONTROLLERS, Config, FlyConfig, PlannerConfig
+from roshan.config import CONTROLLERS, Config, EnergyConfig, FlyConfig, PlannerConfig
 from roshan.kernels.drones import DroneSim
 from roshan.kernels.episode import EpisodeKernels
 from roshan.kernels.explore import ExploreMaps, meander_length
@@ -138,8 +138,9 @@ def take_planner_sims(land: LandCoverMap, cfg: Config, pc: PlannerConfig, num_en
     def build() -> PlannerSims:
         fire = FireSim(land, cfg.fire, cfg.wind, cfg.ignition, num_envs=num_envs, seed=seed, check_memory=False)
         drones = DroneSim(fire, cfg.drones)
+        # scouts keep flying: the battery is the fire-fighting drones' constraint
         explorer_cfg = replace(cfg.drones, num_drones=pc.num_explorers, max_speed=pc.explorer_speed,
-                               view_range=pc.explorer_view_range)
+                               view_range=pc.explorer_view_range, energy=EnergyConfig())
         explorers = DroneSim(fire, explorer_cfg)
         maps = ExploreMaps(fire, explorers, pc.num_explorers, pc.explorer_view_range, version=pc.meander,
                            index_bound=pc.explorer_index_bound)

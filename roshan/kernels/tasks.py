@@ -163,7 +163,13 @@ class GoalRules:
         self.drones.move_drone(e, d, action)
         if ti.static(self.has_sensor):
             self.sensor.observe_drone(e, self.drones, d)
-        return self.handle_goal(e, d)
+        last = 0
+        if ti.static(self.drones.use_energy):
+            if self.drones.lost[e, d] == 0:  # a lost drone follows no goal rule
+                last = self.handle_goal(e, d)
+        else:
+            last = self.handle_goal(e, d)
+        return last
 
     @ti.func
     def handle_goal(self, e, d) -> ti.i32:
