@@ -115,6 +115,9 @@ class PlannerConfig(Section):
                               doc="greedy heuristic: fixed = a drone whose fire is on the groundstation cell drops "
                                   "on it; original = it re-takes that fire every step and never drops, the "
                                   "original's defect (docs/model/agents.md §10.2; the thesis configs keep it)")
+    greedy_resources: bool = True  # with a battery (drones.energy): the heuristic watches battery and tank
+    greedy_energy_margin: float = num(0.25, 0.0, doc="resource-aware greedy: a drone flies home once its battery "
+                                                    "holds at most (1 + margin) x the energy of the flight home")
     max_candidates: int = num(0, 0, 1 << 24,
                               doc="candidate list length K (groundstation included); 0 = every cell + 1")
     temperature: float = num(1.0, 0.0, 10.0, lo_open=True,

@@ -89,11 +89,12 @@ class IgnitionConfig(Section):
 
 # Energy presets: a battery of ``capacity`` joules drained by P = hover_power + speed_power * |v|^2 (+ payload_power
 # times the tank's fill with the water limit), the multirotor form: induced power at hover plus a parasitic term that
-# grows with airspeed. "scenario" is scaled to 35x36_Woods (a ~100 s episode, 35 s to cross the map): a full battery
-# hovers 40 s, so each drone returns to the groundstation several times an episode. "off" is the original: drones
-# fly forever.
+# grows with airspeed. "scenario" is scaled to 35x36_Woods (350 x 360 m; the far corner is 35 s from the
+# groundstation at full speed, an episode without batteries 50-120 s): a full battery lasts 88 s at full speed (170 W)
+# and 125 s hovering, so every cell can be reached and flown back from, and a drone returns to swap about once or twice
+# an episode. "off" is the original: drones fly forever.
 ENERGY_PRESETS: dict[str, dict[str, float]] = {
-    "scenario": {"capacity": 4000.0, "hover_power": 100.0, "speed_power": 0.25, "payload_power": 20.0,
+    "scenario": {"capacity": 15000.0, "hover_power": 100.0, "speed_power": 0.25, "payload_power": 20.0,
                  "swap_time": 3.0},
 }
 
@@ -103,7 +104,8 @@ class EnergyConfig(Section):
     """Flight endurance: a preset (off: unlimited, the original) and any of its values overridden here."""
 
     preset: str = choice("off", ("off", *ENERGY_PRESETS),
-                         doc="off: drones fly forever (the original); scenario: a 40 s battery on 35x36_Woods")
+                         doc="off: drones fly forever (the original); scenario: an 88 s battery (full speed) on "
+                             "35x36_Woods, swapped in 3 s")
     capacity: float | None = num(None, 0.0, lo_open=True, doc="battery energy (J)")
     hover_power: float | None = num(None, 0.0, doc="power drawn hovering with an empty tank (W)")
     speed_power: float | None = num(None, 0.0, doc="extra power per (m/s)^2 of ground speed (W s^2 / m^2)")

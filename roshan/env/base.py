@@ -19,7 +19,7 @@ import torch
 from gymnasium.vector import AutoresetMode
 
 from roshan.config import Config
-from roshan.episode import EPISODE_FIELDS, FIRE_FIELDS, RECORD_FIELDS
+from roshan.episode import ENERGY_FIELDS, EPISODE_FIELDS, FIRE_FIELDS, RECORD_FIELDS
 from roshan.kernels.pool import FlySims, PlannerSims
 from roshan.maps import LandCoverMap, check_drone_map, load_map
 from roshan.runtime import check_built_in_this_runtime, ensure_taichi, taichi_generation, torch_device
@@ -33,7 +33,8 @@ class VectorEnvCore(gym.vector.VectorEnv):
     Every call returns the same tensor objects: observation views into one buffer, rewards, terminations and
     truncations (E,) (a time-out truncates). ``info`` holds ``final_obs`` (the observation of envs that ended
     this step, same layout), ``episode_stats`` (a dict of (E,) tensors, :data:`roshan.episode.EPISODE_FIELDS`),
-    ``episode_fire`` (the fire at the episode's end, :data:`roshan.episode.FIRE_FIELDS`) and ``_episode_stats``
+    ``episode_fire`` (the fire at the episode's end, :data:`roshan.episode.FIRE_FIELDS`), ``episode_energy`` (the
+    batteries, :data:`roshan.episode.ENERGY_FIELDS`; zero without ``drones.energy``) and ``_episode_stats``
     (the (E,) bool mask of envs whose episode ended).
 
     A subclass defines :meth:`_take_simulators` (its bundle from :mod:`roshan.kernels.pool`), calls
@@ -44,7 +45,7 @@ class VectorEnvCore(gym.vector.VectorEnv):
     # True: actions are one (E, N, 2) velocity per drone and a policy sees the drones as one batch of E * N
     # (roshan.algos.networks.flatten_drones); False: actions are one decision per env, (E, N) indices.
     flat_drones = True
-    failure_reasons = ("collision", "boundary", "timeout")  # the failures an episode record can hold
+    level_failures = ("collision", "boundary", "timeout")  # the failures an episode record of the level can hold
     default_caption_name = "FlyAgent"  # who flies, in the caption of rendered frames (caption_name)
     has_reward = True  # False where the controller earns no reward (the greedy heuristic): reports leave it out
     # True where the drones' objective is putting fires out (complex FlyAgent, planner, heuristic): such an env
@@ -99,6 +100,11 @@ class VectorEnvCore(gym.vector.VectorEnv):
         raise NotImplementedError
 
     @property
+    def failure_reasons(self) -> tuple[str, ...]:
+        """The failures an episode record can hold: the level's, and "lost" with a battery (drones.energy)."""
+        return self.level_failures + (("lost",) if self.drones.use_energy else ())
+
+    @property
     def max_env_steps(self) -> int:
         """The most :meth:`step` calls an episode may last (:attr:`t_max` counts physics steps)."""
         return max(1, -(-self.t_max // self.physics_steps_per_step))
@@ -129,7 +135,8 @@ class VectorEnvCore(gym.vector.VectorEnv):
         # "episode_stats", not "episode": gymnasium's RecordEpisodeStatistics writes info["episode"] itself.
         self._info = {"final_obs": self._views(self._final_buf),
                       "episode_stats": {k: self._episode[:, i] for i, k in enumerate(EPISODE_FIELDS)},
-                      "episode_fire": {k: self._episode[:, RECORD_FIELDS.index(k)] for k in FIRE_FIELDS}}
+                      "episode_fire": {k: self._episode[:, RECORD_FIELDS.index(k)] for k in FIRE_FIELDS},
+                      "episode_energy": {k: self._episode[:, RECORD_FIELDS.index(k)] for k in ENERGY_FIELDS}}
 
     def _batched_spaces(self) -> None:
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, self.num_envs)

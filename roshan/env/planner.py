@@ -48,7 +48,7 @@ class PlannerVectorEnv(VectorEnvCore):
     flat_drones = False  # one decision per env: (E, N) candidate indices
     # The frozen FlyAgents fly the drones and the planner's records end only by timeout or burnout
     # (kernels/planner.py): no collision or boundary rows in its reports.
-    failure_reasons = ("timeout", "burnout")
+    level_failures = ("timeout", "burnout")
 
     def __init__(self, num_envs: int = 1, config: Config | None = None, planner: PlannerConfig | None = None,
                  evaluation: bool = False, controller: str = "planner", seed: int | None = None,

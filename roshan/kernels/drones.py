@@ -268,6 +268,25 @@ class DroneSim:
                 self.goal_cell[e, d] = -1
 
     @ti.func
+    def energy_to_groundstation(self, e, d) -> ti.f32:
+        """Joules drone d draws on the quickest flight to the groundstation's centre with a full tank: each axis is
+        clamped to v_max, so the longer one flies at v_max and the other in step with it (no detour counted)."""
+        gap = ti.abs(self.groundstation_centre(e) * self.cell - self.pos[e, d])
+        long_axis = ti.max(gap[0], gap[1])
+        ratio = ti.min(gap[0], gap[1]) / ti.max(long_axis, 1e-6)
+        speed_sq = self.v_max * self.v_max * (1.0 + ratio * ratio)
+        power = self.hover_power + self.speed_power * speed_sq + self.payload_power
+        return power * long_axis / self.v_max
+
+    @ti.func
+    def is_stocked(self, e, d) -> ti.i32:
+        """A full battery, and a full tank with the water limit."""
+        full = ti.cast(self.energy[e, d] >= self.battery, ti.i32)
+        if ti.static(self.use_water):
+            full = ti.cast(full != 0 and self.water[e, d] >= self.capacity, ti.i32)
+        return full
+
+    @ti.func
     def at_groundstation(self, e, d) -> ti.i32:
         gs = self.groundstation[e]
         return ti.cast(self.cell_of(e, d) == gs[0] * self.cols + gs[1], ti.i32)

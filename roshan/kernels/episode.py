@@ -11,6 +11,8 @@ from roshan.episode import RECORD_FIELDS
 EP_SUCCESS, EP_REASON, EP_STEPS, EP_BURNED, EP_EXTINGUISHED, EP_RETURN, EP_BURNING, EP_LIT = (
     RECORD_FIELDS.index(k) for k in ("success", "reason", "steps", "burned_fraction", "extinguished", "return",
                                      "burning_fraction", "lit_fraction"))
+EP_LOST, EP_SWAPS, EP_ENERGY, EP_BASE_TIME = (
+    RECORD_FIELDS.index(k) for k in ("drones_lost", "battery_swaps", "energy_used", "base_time"))
 
 
 @ti.func
@@ -25,6 +27,25 @@ def write_record(episode: ti.template(), fire: ti.template(), e, success, reason
     episode[e, EP_RETURN] = ret
     episode[e, EP_BURNING] = ti.cast(fire.burning_count(e), ti.f32) / fire.num_cells
     episode[e, EP_LIT] = ti.cast(fire.lit_count(e), ti.f32) / fire.num_cells
+
+
+@ti.func
+def write_energy(episode: ti.template(), drones: ti.template(), e):
+    """Env e's battery columns (with ``drones.energy`` only; they stay zero without it)."""
+    if ti.static(drones.use_energy):
+        lost = 0
+        swaps = 0
+        used = 0.0
+        landed = 0
+        for d in range(drones.num_drones):
+            lost += drones.lost[e, d]
+            swaps += drones.swaps[e, d]
+            used += drones.energy_used[e, d]
+            landed += drones.base_steps[e, d]
+        episode[e, EP_LOST] = ti.cast(lost, ti.f32)
+        episode[e, EP_SWAPS] = ti.cast(swaps, ti.f32)
+        episode[e, EP_ENERGY] = used
+        episode[e, EP_BASE_TIME] = ti.cast(landed, ti.f32) * drones.dt / drones.num_drones
 
 
 @ti.data_oriented
@@ -84,5 +105,6 @@ class EpisodeKernels:
     def close_episode(self, episode: ti.template(), dones: ti.template(), e, success, reason, truncated):
         """Write env e's record and done flags: truncated (a pure time-out) or terminated."""
         write_record(episode, self.fire, e, success, reason, self.steps[e], self.ret[e])
+        write_energy(episode, self.drones, e)
         dones[e, 0] = ti.cast(1 - truncated, ti.u8)
         dones[e, 1] = ti.cast(truncated, ti.u8)

@@ -16,7 +16,7 @@ import numpy as np
 import taichi as ti
 
 from roshan.config import FlyConfig
-from roshan.episode import BOUNDARY, COLLISION, TIMEOUT
+from roshan.episode import BOUNDARY, COLLISION, LOST, TIMEOUT
 from roshan.kernels import observe, rng
 from roshan.kernels.drones import DroneSim
 from roshan.kernels.episode import EpisodeKernels
@@ -149,13 +149,16 @@ class FlyKernels(EpisodeKernels):
 
     @ti.func
     def failure_reason(self, e, d, timed_out) -> ti.i32:
-        """docs/model/agents.md §9: later rules overwrite earlier ones (timeout > collision > boundary)."""
+        """docs/model/agents.md §9: later rules overwrite earlier ones (timeout > lost > collision > boundary)."""
         reason = 0
         if self.drones.out_count[e, d] > 1:
             reason = BOUNDARY
         if ti.static(self.collision_on):
             if self.drones.collided[e, d] != 0:
                 reason = COLLISION
+        if ti.static(self.drones.use_energy):
+            if self.drones.lost[e, d] != 0:
+                reason = LOST  # its battery ran empty away from the groundstation
         if timed_out != 0:
             reason = TIMEOUT
         return reason

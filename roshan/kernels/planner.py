@@ -25,7 +25,7 @@ import math
 import numpy as np
 import taichi as ti
 
-from roshan.episode import BURNOUT, TIMEOUT
+from roshan.episode import BURNOUT, LOST, TIMEOUT
 from roshan.kernels import observe
 from roshan.kernels.drones import DroneSim
 from roshan.kernels.episode import EpisodeKernels
@@ -74,6 +74,7 @@ class PlannerKernels(EpisodeKernels):
         coef: :class:`roshan.kernels.rewards.PlannerCoefficients`.
         greedy: the drones follow the heuristic state machine (docs/model/agents.md §10.2) instead of planner goals.
         greedy_home_fixed: the heuristic with the groundstation fix (:class:`GoalRules`, ``wake_reserved``).
+        greedy_resources, energy_margin: with a battery, the resource-aware heuristic (:class:`GoalRules`).
         move_explorers: step the explorers (evaluation); in planner training they stay at the groundstation.
         detected: the candidates are the fire map's cells (fires some drone has seen) instead of all burning
             cells (centralised training).
@@ -84,7 +85,8 @@ class PlannerKernels(EpisodeKernels):
 
     def __init__(self, fire: FireSim, drones: DroneSim, explorers: DroneSim, maps: ExploreMaps, *, interval: int,
                  t_max: int, coef, greedy: bool, greedy_home_fixed: bool, move_explorers: bool, detected: bool,
-                 burnout: float, max_candidates: int, fly_frames: int, explore_frames: int):
+                 burnout: float, max_candidates: int, fly_frames: int, explore_frames: int,
+                 greedy_resources: bool = False, energy_margin: float = 0.25):
         super().__init__(fire, t_max)
         self.drones, self.explorers, self.maps = drones, explorers, maps
         self.interval, self.coef = interval, coef
@@ -103,7 +105,8 @@ class PlannerKernels(EpisodeKernels):
         # themselves.
         if greedy:
             self.rules = GoalRules(drones, KnownFires(fire, maps), mode=EXTINGUISH, wake_idle=True,
-                                   wake_reserved=not greedy_home_fixed, sensor=maps)
+                                   wake_reserved=not greedy_home_fixed, sensor=maps, resources=greedy_resources,
+                                   energy_margin=energy_margin)
         else:
             self.rules = GoalRules(drones, BurningCells(fire), mode=DROP_ANYWHERE, sensor=maps)
         E, N = fire.num_envs, drones.num_drones
@@ -219,6 +222,13 @@ class PlannerKernels(EpisodeKernels):
         if ti.cast(self.fire.burned_count(e), ti.f32) > self.burnout * self.fire.num_cells:
             terminal = 1
             reason = BURNOUT
+        if ti.static(self.drones.use_energy):
+            lost = 0
+            for d in range(self.drones.num_drones):
+                lost += self.drones.lost[e, d]
+            if lost == self.drones.num_drones:
+                terminal = 1
+                reason = LOST  # every drone came down with an empty battery
         if timed_out != 0:
             terminal = 1
             reason = TIMEOUT

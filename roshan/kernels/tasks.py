@@ -142,13 +142,19 @@ class GoalRules:
             without a reserved fire (``goal_cell < 0``) is idle.
         sensor: an object whose ``observe_drone(e, drones, d)`` runs right after the move (the planner's fire
             map), or None.
+        resources: with a battery (``drones.energy``), the resource-aware heuristic: a drone flies home once its
+            battery holds no more than (1 + ``energy_margin``) times what flying home takes, or its tank is
+            empty, waits there until both are full, and then takes the nearest free fire.
     """
 
     def __init__(self, drones, candidates, *, mode: int, water_policy: bool = False, sticky: bool = False,
-                 wake_idle: bool = False, wake_reserved: bool = True, sensor=None):
+                 wake_idle: bool = False, wake_reserved: bool = True, sensor=None, resources: bool = False,
+                 energy_margin: float = 0.25):
         self.drones, self.candidates, self.mode = drones, candidates, mode
         self.water_policy, self.sticky, self.wake_idle = water_policy, sticky, wake_idle
         self.wake_reserved = wake_reserved
+        self.resources = resources and drones.use_energy
+        self.energy_margin = energy_margin
         self.sensor = sensor
         self.has_sensor = sensor is not None  # read in ti.static (no "is" in Taichi scope)
 
@@ -187,11 +193,15 @@ class GoalRules:
                 if going_home != 0 and dr.water[e, d] >= dr.capacity:  # refilled in move_drone this step
                     dr.refilling[e, d] = 0
                     self.retarget(e, d)
+            if ti.static(self.resources):
+                going_home = self.watch_resources(e, d)
             waking = 0
             if ti.static(self.wake_idle):
                 idle = dr.heads_home(e, d)
                 if ti.static(not self.wake_reserved):
                     idle = ti.cast(idle != 0 and dr.goal_cell[e, d] < 0, ti.i32)
+                if ti.static(self.resources):
+                    idle = ti.cast(idle != 0 and going_home == 0, ti.i32)  # a drone sent home stays there
                 waking = ti.cast(idle != 0 and self.candidates.any(e) != 0, ti.i32)
             if waking != 0:
                 self.retarget(e, d)
@@ -201,6 +211,23 @@ class GoalRules:
                 else:
                     dr.objective[e, d] = 1
         return last
+
+    @ti.func
+    def watch_resources(self, e, d) -> ti.i32:
+        """The resource-aware heuristic's rule (``resources``): 1 while drone d flies home or waits there."""
+        dr = self.drones
+        home = dr.refilling[e, d]
+        if home != 0 and dr.is_stocked(e, d) != 0:  # a full battery and tank again: back to the fires
+            dr.refilling[e, d] = 0
+            home = 0
+            self.retarget(e, d)
+        elif home == 0:
+            low = dr.energy[e, d] <= (1.0 + self.energy_margin) * dr.energy_to_groundstation(e, d)
+            if low or dr.has_water(e, d) == 0:
+                dr.refilling[e, d] = 1
+                home = 1
+                take_cell(dr, e, d, -1)  # its fire is free for the others
+        return home
 
     @ti.func
     def extinguish_at_goal(self, e, d) -> ti.i32:

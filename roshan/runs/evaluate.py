@@ -23,7 +23,7 @@ from roshan.checkpoints import folder_lock, resolve_checkpoint
 from roshan.config import PLANNER, Config, apply_overrides
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import straight_to_goal
-from roshan.episode import EPISODE_FIELDS, FIRE_FIELDS, REASONS, RECORD_FIELDS
+from roshan.episode import ENERGY_FIELDS, EPISODE_FIELDS, FIRE_FIELDS, REASONS, RECORD_FIELDS
 from roshan.io import OutputError, prepare_output, refuse_overwrite, write_gif, writing
 from roshan.runs.collect import next_observation
 from roshan.runs.envs import caption_name, make_env
@@ -86,7 +86,8 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
             frame += 1
         if bool(ended.any()):
             stats = torch.stack([info["episode_stats"][k] for k in EPISODE_FIELDS]
-                                + [info["episode_fire"][k] for k in FIRE_FIELDS], dim=-1).cpu().numpy()
+                                + [info["episode_fire"][k] for k in FIRE_FIELDS]
+                                + [info["episode_energy"][k] for k in ENERGY_FIELDS], dim=-1).cpu().numpy()
             for e in ended.nonzero().flatten().tolist():
                 if done_count[e] < quota:
                     rows[e].append(stats[e])
@@ -103,6 +104,9 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
            "burning": col("burning_fraction"), "lit": col("lit_fraction"),
            "extinguished": col("extinguished").astype(int), "env": np.array([e for e, _, _ in kept]),
            "index": np.array([i for _, i, _ in kept])}
+    if env.drones.use_energy:  # the battery columns, per episode (drones lost and swaps as counts)
+        out.update({"drones_lost": col("drones_lost").astype(int), "battery_swaps": col("battery_swaps").astype(int),
+                    "energy_used": col("energy_used"), "base_time": col("base_time")})
     if not env.has_reward:
         del out["reward"]
     return out
@@ -322,12 +326,16 @@ def write_learning_curves(run_dir: Path, path: Path, title: str, level: str, say
 
 def flyagent_json(summary: dict, reasons: tuple[str, ...] = ("collision", "boundary", "timeout")) -> dict:
     """The issue's eval JSON: episodes, success_rate, failure_rates (collision, boundary, timeout, and the env's
-    other ``failure_reasons``: the planner adds burnout; a reason the env cannot have reads 0), tte (steps)."""
+    other ``failure_reasons``: the planner adds burnout; a reason the env cannot have reads 0), tte (steps); with a
+    battery also drones_lost, battery_swaps, energy_used (J) and base_time (s), means per episode."""
     fr = summary["failure_rates"]
     keys = ("collision", "boundary", "timeout", *(r for r in reasons if r not in ("collision", "boundary", "timeout")))
-    return {"episodes": summary["episodes"], "success_rate": summary["success_rate"],
-            "failure_rates": {k: fr.get(k, 0.0) for k in keys},
-            "tte": {k: summary["tte"][k] for k in ("mean", "std", "median")}}
+    out = {"episodes": summary["episodes"], "success_rate": summary["success_rate"],
+           "failure_rates": {k: fr.get(k, 0.0) for k in keys},
+           "tte": {k: summary["tte"][k] for k in ("mean", "std", "median")}}
+    if "drones_lost" in summary:  # with a battery: means per episode
+        out.update({k: summary[k]["mean"] for k in ("drones_lost", "battery_swaps", "energy_used", "base_time")})
+    return out
 
 
 def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_envs: int | None = None,

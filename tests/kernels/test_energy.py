@@ -53,7 +53,7 @@ def extinguish(drones: ti.template()) -> ti.i32:
 def test_the_presets_and_overrides():
     assert EnergyConfig().values() == {} and not DroneConfig().energy.enabled
     assert EnergyConfig(preset="scenario", swap_time=5).values() == {
-        "capacity": 4000.0, "hover_power": 100.0, "speed_power": 0.25, "payload_power": 20.0, "swap_time": 5.0}
+        "capacity": 15000.0, "hover_power": 100.0, "speed_power": 0.25, "payload_power": 20.0, "swap_time": 5.0}
     with pytest.raises(ConfigError, match="capacity"):
         from_dict(DroneConfig, {"energy": {"preset": "scenario", "capacity": 0.0}})
     with pytest.raises(ConfigError, match="preset"):
@@ -68,7 +68,7 @@ def test_energy_drawn_over_a_known_flight_is_the_power_law_integrated():
     fly(d, (1.0, 1.0), 30)  # |v|^2 = 200: P = 100 + 50 + 20 = 170 W
     expected = (60 * 126.25 + 30 * 170.0) * DT
     assert scalar(d.energy_used) == pytest.approx(expected, rel=1e-5)
-    assert scalar(d.energy) == pytest.approx(4000.0 - expected, rel=1e-5)
+    assert scalar(d.energy) == pytest.approx(15000.0 - expected, rel=1e-5)
     assert scalar(d.lost) == 0
 
 
@@ -111,20 +111,35 @@ def test_the_same_drone_with_battery_left_puts_the_fire_out():
     assert extinguish(d) == 1 and d.fire.stats()["burning"][0] == 0
 
 
+@ti.kernel
+def energy_home(drones: ti.template()) -> ti.f32:
+    return drones.energy_to_groundstation(0, 0)
+
+
+def test_the_energy_of_the_flight_home_is_the_quickest_flights():
+    d = make()
+    gs = (d.groundstation.to_numpy()[0] + 0.5) * d.cell
+    put(d, tuple(gs + np.array([80.0, -60.0])))
+    # the 80 m axis at 10 m/s takes 8 s, the other flies 7.5 m/s beside it: |v|^2 = 156.25, P = 100 + 39.0625 + 20
+    assert energy_home(d) == pytest.approx(8.0 * (100.0 + 0.25 * 156.25 + 20.0), rel=1e-5)
+    put(d, tuple(gs))
+    assert energy_home(d) == 0.0
+
+
 def test_a_swap_on_the_groundstation_restores_the_battery_after_the_set_time():
     d = make(swap_time=2.0)  # 20 steps landed
     put(d, AWAY)
     fly(d, (0.0, 0.0), 10)
     left = scalar(d.energy)
-    assert left < 4000.0
+    assert left < 15000.0
     gs = d.groundstation.to_numpy()[0]
     put(d, tuple((gs + 0.5) * d.cell))
     fly(d, (0.0, 0.0), 19)
     assert scalar(d.energy) == left and scalar(d.swaps) == 0  # landed: nothing drawn, the swap not done yet
     fly(d, (0.0, 0.0), 1)
-    assert scalar(d.energy) == 4000.0 and scalar(d.swaps) == 1
+    assert scalar(d.energy) == 15000.0 and scalar(d.swaps) == 1
     fly(d, (0.0, 0.0), 40)  # a full battery on the base is not swapped again
-    assert scalar(d.energy) == 4000.0 and scalar(d.swaps) == 1 and scalar(d.base_steps) == 60
+    assert scalar(d.energy) == 15000.0 and scalar(d.swaps) == 1 and scalar(d.base_steps) == 60
 
 
 def test_leaving_the_base_before_the_swap_is_done_restarts_it():

@@ -8,7 +8,13 @@ from statistics import NormalDist
 
 import numpy as np
 
-from roshan.runs.report.episodes import ALWAYS_REPORTED, IF_PRESENT, outcome_categories, validate_episodes
+from roshan.runs.report.episodes import (
+    ALWAYS_REPORTED,
+    ENERGY_COLUMNS,
+    IF_PRESENT,
+    outcome_categories,
+    validate_episodes,
+)
 
 
 def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
@@ -150,7 +156,8 @@ def summarize(episodes: Mapping[str, Sequence], confidence: float = 0.95, reason
 
     Returns:
         ``{"episodes": n, "success_rate", "success_ci": [lo, hi] (Wilson), "failure_rates": {reason: rate},
-        "tte", "tte_success", ["tte_seconds"], ["reward"], ["burned", "burning", "lit", "extinguished"]}``;
+        "tte", "tte_success", ["tte_seconds"], ["reward"], ["burned", "burning", "lit", "extinguished"],
+        [ENERGY_COLUMNS: with a battery]}``;
         rates are fractions of all n episodes, each statistics entry is :func:`describe` (``tte_success`` over
         successful episodes only), fire fractions are fractions of the map's cells, extinguished a cell count.
         A column the episodes lack (the greedy heuristic's reward) has no entry.
@@ -171,7 +178,7 @@ def summarize(episodes: Mapping[str, Sequence], confidence: float = 0.95, reason
     if dt is not None:
         summary["step_seconds"] = float(dt)
         summary["tte_seconds"] = describe(ep["time"] * float(dt), confidence)
-    for key in ("reward", "burned", "burning", "lit", "extinguished"):
+    for key in ("reward", "burned", "burning", "lit", "extinguished", *ENERGY_COLUMNS):
         if key in ep:
             summary[key] = describe(ep[key], confidence)
     return summary

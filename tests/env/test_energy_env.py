@@ -1,0 +1,89 @@
+"""Batteries at the env level (issue 33): a FlyAgent drone whose battery runs empty ends its episode as "lost";
+a planner episode fails as "lost" once every drone came down; the records and the evaluation carry the batteries."""
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from roshan.config import Config, DroneConfig, EnergyConfig, IgnitionConfig, PlannerConfig, WindConfig
+from roshan.env.fly import FlyVectorEnv
+from roshan.env.planner import PlannerVectorEnv
+from roshan.episode import LOST, REASONS
+from roshan.runs.evaluate import flyagent_json, run_episodes
+from roshan.runs.report import summarize
+
+MODEL = str(Path(__file__).resolve().parents[2] / "models" / "fly_simple")
+FIRES = IgnitionConfig(fire_percentage=0.05, clusters=2)
+# 30 J at 100 W (+ 20 W payload, + the speed term): every drone that leaves the groundstation is down within 3 steps
+TINY = EnergyConfig(preset="scenario", capacity=30.0)
+
+
+def test_a_fly_agent_drone_with_an_empty_battery_ends_the_episode_as_lost():
+    cfg = Config(ignition=FIRES, drones=DroneConfig(num_drones=2, groundstation_start_percentage=0.0, energy=TINY),
+                 wind=WindConfig(speed=0.0))
+    env = FlyVectorEnv(2, cfg, seed=1)
+    assert env.failure_reasons == ("collision", "boundary", "timeout", "lost")
+    env.reset(seed=1)
+    actions = torch.zeros((2, 2, 2))
+    for step in range(1, 4):
+        _, _, terms, truncs, info = env.step(actions)
+        if step < 3:
+            assert not bool(info["_episode_stats"].any())
+    assert bool(terms.all()) and not bool(truncs.any())  # a crash is no time-out: terminated, not truncated
+    stats, batteries = info["episode_stats"], info["episode_energy"]
+    assert stats["reason"].tolist() == [LOST, LOST] and stats["success"].tolist() == [0.0, 0.0]
+    assert batteries["drones_lost"].tolist() == [2.0, 2.0]
+    np.testing.assert_allclose(batteries["energy_used"].numpy(), [60.0, 60.0], rtol=1e-5)  # both batteries, whole
+    env.close()
+
+
+def test_without_a_battery_the_records_hold_no_battery_figures():
+    cfg = Config(ignition=FIRES, drones=DroneConfig(num_drones=2, groundstation_start_percentage=0.0),
+                 wind=WindConfig(speed=0.0))
+    env = FlyVectorEnv(2, cfg, seed=1)
+    assert "lost" not in env.failure_reasons
+    env.reset(seed=1)
+    for _ in range(3):
+        _, _, _, _, info = env.step(torch.zeros((2, 2, 2)))
+    assert not bool(info["_episode_stats"].any())
+    assert all(float(v.abs().sum()) == 0.0 for v in info["episode_energy"].values())
+    env.close()
+
+
+def greedy_env(energy: EnergyConfig, resources: bool = True) -> PlannerVectorEnv:
+    cfg = Config(ignition=FIRES, drones=DroneConfig(num_drones=3, energy=energy), wind=WindConfig(speed=0.0))
+    pc = PlannerConfig(interval=1, fly_model=MODEL, explorer_model=MODEL, num_explorers=2, greedy_home="fixed",
+                       greedy_resources=resources)
+    return PlannerVectorEnv(2, cfg, pc, evaluation=True, controller="greedy", seed=3)
+
+
+def test_a_planner_episode_fails_as_lost_once_every_drone_came_down():
+    env = greedy_env(TINY, resources=False)
+    assert env.failure_reasons == ("timeout", "burnout", "lost")
+    out = run_episodes(env, lambda obs: torch.zeros((2, 3), dtype=torch.long), 2, seed=3)
+    assert list(out["reason"]) == ["lost", "lost"] and out["success"].tolist() == [0, 0]
+    assert out["drones_lost"].tolist() == [3, 3] and out["battery_swaps"].tolist() == [0, 0]
+    np.testing.assert_allclose(out["energy_used"], [90.0, 90.0], rtol=1e-5)
+    assert REASONS[LOST] == "lost"
+    env.close()
+
+
+def test_the_plain_greedy_blind_to_its_batteries_loses_every_drone():
+    env = greedy_env(EnergyConfig(preset="scenario", capacity=4000.0), resources=False)
+    out = run_episodes(env, lambda obs: torch.zeros((2, 3), dtype=torch.long), 2, seed=3)
+    assert list(out["reason"]) == ["lost", "lost"]
+    assert out["drones_lost"].tolist() == [3, 3] and out["battery_swaps"].tolist() == [0, 0]
+    np.testing.assert_allclose(out["energy_used"], [12000.0, 12000.0], rtol=1e-5)  # three whole batteries each
+    js = flyagent_json(summarize(out, reasons=env.failure_reasons), env.failure_reasons)  # eval --json's shape
+    assert js["failure_rates"]["lost"] == 1.0 and js["drones_lost"] == 3.0 and js["battery_swaps"] == 0.0
+    env.close()
+
+
+def test_the_resource_aware_greedy_swaps_batteries_and_loses_no_drone():
+    env = greedy_env(EnergyConfig(preset="scenario"))
+    out = run_episodes(env, lambda obs: torch.zeros((2, 3), dtype=torch.long), 4, seed=3)
+    assert out["drones_lost"].tolist() == [0, 0, 0, 0]  # a base is always reachable on this map: none may be lost
+    assert out["success"].tolist() == [1, 1, 1, 1]
+    assert out["battery_swaps"].sum() >= 3  # the long episodes needed returns (every drone swaps at once here)
+    env.close()
