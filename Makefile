@@ -84,7 +84,8 @@ demo: install
 test: install
 	$(PYTHON) -m pytest -q --durations=15
 
-# The edit loop: everything but the tests marked slow (long physics or training runs; CI runs them all).
+# The edit loop: everything but the tests marked slow (each took 5 s or more in a full run on the 2-core machine:
+# training, subprocesses, long physics); CI runs them all.
 test-fast: install
 	$(PYTHON) -m pytest -q -m "not slow"
 

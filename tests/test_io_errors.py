@@ -132,6 +132,7 @@ def _disk_full_from(update: int, monkeypatch, target: str):
         monkeypatch.setattr(roshan.runs.train.Trainer, "_log", log)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("target", ["checkpoint", "tensorboard"])
 def test_a_full_disk_stops_training_after_the_last_good_checkpoint(tmp_path, monkeypatch, target):
     _disk_full_from(2, monkeypatch, target)

@@ -116,6 +116,7 @@ def _bundle_and_buffers(env) -> tuple[int, int]:
     return field_bytes(*sims) + field_bytes(copies), buffers
 
 
+@pytest.mark.slow
 def test_the_fly_env_estimate_matches_its_fields_and_buffers():
     cfg = Config(drones=DroneConfig(num_drones=3), map=MapConfig(name="21x21_Field"))
     env = FlyVectorEnv(5, cfg)
@@ -125,6 +126,7 @@ def test_the_fly_env_estimate_matches_its_fields_and_buffers():
     assert pool.fly_estimate(env.land, cfg, 5).bytes == sims
 
 
+@pytest.mark.slow
 def test_the_planner_env_estimate_matches_its_fields_and_buffers():
     cfg = Config(drones=DroneConfig(num_drones=2), map=MapConfig(name="21x21_Field"))
     pc = PlannerConfig(fly_model=MODEL, explorer_model=MODEL, num_explorers=2)

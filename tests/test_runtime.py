@@ -23,6 +23,7 @@ def test_simulators_refuse_to_start_near_the_field_tree_limit(monkeypatch):
         FireSim(make_map(np.full((4, 4), 2)), num_envs=1)
 
 
+@pytest.mark.slow
 def test_reset_taichi_frees_every_field_tree():
     for _ in range(3):
         FireSim(make_map(np.full((4, 4), 2)), num_envs=2).reset()
@@ -49,6 +50,7 @@ def simulate_summary(arch: str) -> tuple[str, str]:
     return (started.group(1) if started else "?"), summary.groups()
 
 
+@pytest.mark.slow
 def test_vulkan_is_refused_because_its_fire_differs_from_the_cpu():
     with pytest.raises(ValueError, match=r"--arch vulkan is refused: .*ROSHAN_UNVERIFIED_ARCH=vulkan"):
         runtime.init_taichi("vulkan")

@@ -15,6 +15,7 @@ def invoke(*args):
     return result
 
 
+@pytest.mark.slow
 def test_simulate_writes_nonblank_frames_gif_and_json(tmp_path):
     frames, gif, out = tmp_path / "frames", tmp_path / "fire.gif", tmp_path / "run.json"
     r = invoke("simulate", "--map", "35x36_Woods", "--envs", "2", "--steps", "600", "--every", "200", "--seed", "4",
@@ -34,6 +35,7 @@ def test_simulate_writes_nonblank_frames_gif_and_json(tmp_path):
     assert data["config"]["ignition"]["fire_percentage"] == 0.1
 
 
+@pytest.mark.slow
 def test_simulate_json_is_a_function_of_the_seed(tmp_path):
     def series(seed, name):
         path = tmp_path / name
@@ -78,6 +80,7 @@ def test_maps_crop_round_trips_a_window(tmp_path):
     np.testing.assert_array_equal(crop.classes, src.classes[50:80, 100:140])
 
 
+@pytest.mark.slow
 def test_bench_fire_and_fidelity_run_on_tiny_budgets(tmp_path):
     out = tmp_path / "fire.json"
     r = invoke("bench", "fire", "--envs", "1,2", "--steps", "50", "--warmup", "10", "--no-big", "--json", out)
@@ -90,6 +93,7 @@ def test_bench_fire_and_fidelity_run_on_tiny_budgets(tmp_path):
     assert (tmp_path / "f.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_bench_env_runs_on_a_tiny_budget(tmp_path):
     out = tmp_path / "env.json"
     r = invoke("bench", "env", "--envs", "2", "--drones", "2", "--fire", "0.05", "--policies",

@@ -51,6 +51,7 @@ def test_config_show_suggests_only_close_names(asked, answer):
     assert "wind.direction" not in r.output
 
 
+@pytest.mark.slow
 def test_threads_beyond_the_cores_are_said():
     r = run("simulate", "--steps", "1", "--quiet", "--threads", cpu_cores() + 997)
     assert r.exit_code == 0, r.output

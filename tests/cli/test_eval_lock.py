@@ -5,6 +5,7 @@ import fcntl
 import os
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 from roshan.cli import main
@@ -27,6 +28,7 @@ def hold(folder: Path) -> int:
     return fd
 
 
+@pytest.mark.slow
 def test_a_second_evaluation_into_a_busy_folder_is_refused_and_writes_nothing(tmp_path):
     out, replaced = tmp_path / "out", tmp_path / "replaced"
     fd = hold(out)

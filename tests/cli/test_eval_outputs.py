@@ -30,6 +30,7 @@ def committed_files(run: Path) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in (run / "eval").iterdir() if p.is_file()}
 
 
+@pytest.mark.slow
 def test_two_evaluations_with_different_settings_keep_both_and_the_committed_one(model):
     committed = committed_files(model)
     res = cli("eval", model, *TINY)
@@ -64,6 +65,7 @@ def test_two_evaluations_with_different_settings_keep_both_and_the_committed_one
     assert (first / "episodes.csv").read_bytes() == first_csv  # same seed, same episodes
 
 
+@pytest.mark.slow
 def test_explicit_out_and_json_follow_the_same_rule(model, tmp_path):
     out, js = tmp_path / "out", tmp_path / "e.json"
     res = cli("eval", model, *TINY, "--out", out, "--json", js)

@@ -4,6 +4,7 @@ the planner named in train's help, and a bundled map's name taken by maps crop a
 import re
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from roshan.cli import main
@@ -14,6 +15,7 @@ def cli(*args):
     return CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
 
 
+@pytest.mark.slow
 def test_the_progress_bar_counts_whole_episodes_without_a_terminal(capsys):
     from roshan.env.fly import FlyVectorEnv
     from roshan.runs.evaluate import baseline_fn, run_episodes

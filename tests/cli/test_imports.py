@@ -34,10 +34,12 @@ def loaded_by(args: list[str]) -> list[str]:
     ["config", "show", "fire"],
     ["simulate", "--map", "35x36_Woods", "--envs", "1", "--steps", "1", "--quiet"],
 ], ids=lambda a: " ".join(a[:2]))
+@pytest.mark.slow
 def test_light_commands_import_neither_torch_nor_gymnasium(args):
     assert loaded_by(args) == []
 
 
+@pytest.mark.slow
 def test_drone_simulation_does_load_the_envs():
     """The check above can fail: a command that flies drones needs the env, and so torch and gymnasium."""
     assert loaded_by(["simulate", "--map", "35x36_Woods", "--envs", "1", "--steps", "1", "--drones", "1",

@@ -33,6 +33,7 @@ def no_display(monkeypatch):
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("existing", ["json", "gif"])
 def test_simulate_refuses_an_existing_json_or_gif(tmp_path, existing):
     paths = {"json": tmp_path / "run.json", "gif": tmp_path / "fire.gif"}
@@ -45,6 +46,7 @@ def test_simulate_refuses_an_existing_json_or_gif(tmp_path, existing):
     assert paths["json"].read_bytes()[:1] == b"{" and paths["gif"].read_bytes()[:6] == b"GIF89a"
 
 
+@pytest.mark.slow
 def test_watch_refuses_an_existing_default_gif(tmp_path, monkeypatch, no_display):
     monkeypatch.chdir(tmp_path)
     gif = Path("out/watch.gif")
@@ -56,6 +58,7 @@ def test_watch_refuses_an_existing_default_gif(tmp_path, monkeypatch, no_display
     assert gif.read_bytes()[:6] == b"GIF89a"
 
 
+@pytest.mark.slow
 def test_eval_save_buffer_refuses_an_existing_file(tmp_path):
     buf = tmp_path / "buffer.pt"
     buf.write_bytes(OLD)
@@ -80,6 +83,7 @@ def test_maps_crop_refuses_an_existing_output(tmp_path):
     assert load_map(out).classes.shape == (20, 20)
 
 
+@pytest.mark.slow
 def test_simulate_refuses_a_frames_folder_that_holds_frames(tmp_path):
     frames = tmp_path / "frames"
     frames.mkdir()

@@ -6,6 +6,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 from PIL import Image
 
@@ -33,6 +34,7 @@ def test_shipped_models_evaluate_under_out_and_runs_in_their_folder(tmp_path):
     assert eval_root(tmp_path / "runs" / "mine") == tmp_path / "runs" / "mine" / "eval"
 
 
+@pytest.mark.slow
 def test_readme_eval_and_watch_commands_write_only_under_out(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("DISPLAY", raising=False)

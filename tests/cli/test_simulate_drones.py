@@ -48,6 +48,7 @@ def simple_env():
                         fly=FlyConfig(policy="simple", fire_goal_percentage=0.5), seed=5)
 
 
+@pytest.mark.slow
 def test_straight_to_goal_reaches_the_goal_in_about_the_straight_line_time(simple_env):
     env = simple_env
     obs, _ = env.reset(seed=5)
@@ -95,6 +96,7 @@ def greedy_run(tmp_path_factory):
     return r, sorted(frames.glob("*.png")), json.loads(out.read_text())
 
 
+@pytest.mark.slow
 def test_simulate_with_greedy_drones_draws_them_in_their_colours(greedy_run):
     r, pngs, _ = greedy_run
     assert "success rate" in r.output and "episodes finished" in r.output

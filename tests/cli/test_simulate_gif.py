@@ -1,10 +1,12 @@
 """`roshan simulate --gif` without `--frames` leaves the GIF and nothing else (its frames are scratch files)."""
 
+import pytest
 from click.testing import CliRunner
 
 from roshan.cli import main
 
 
+@pytest.mark.slow
 def test_gif_alone_leaves_no_frames_folder(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # nothing may appear in the working directory either (imgui.ini, frames/)
     out = tmp_path / "out"

@@ -58,6 +58,7 @@ def test_watch_shows_the_run_in_a_window_on_a_display(virtual_display, tmp_path)
     assert len(np.unique(image.reshape(-1, 3), axis=0)) > 10, "the window showed a blank image"
 
 
+@pytest.mark.slow
 def test_watch_without_a_display_writes_a_gif_and_says_so(monkeypatch, tmp_path):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)

@@ -60,12 +60,14 @@ def test_registration_is_idempotent():
     assert spec.vector_entry_point == "roshan.env.fly:FlyVectorEnv"
 
 
+@pytest.mark.slow
 @pytest.mark.filterwarnings("ignore:.*A Box observation space")  # the spaces are unbounded on purpose
 def test_check_env(fly_env):
     assert isinstance(fly_env.unwrapped, FlyEnv)
     check_env(fly_env.unwrapped)
 
 
+@pytest.mark.slow
 def test_make_vec_gives_the_vector_env():
     vec = gymnasium.make_vec(ENV_ID, num_envs=3, config=SMALL)
     try:
@@ -140,6 +142,7 @@ def test_parallel_agents_end_together(par_env):
     assert par_env.agents == agents
 
 
+@pytest.mark.slow
 def test_an_env_says_how_many_steps_an_episode_may_last():
     """t_max counts physics steps; one step of the FlyAgent env runs frame_skips of them, one planner step interval."""
     import math
@@ -150,6 +153,7 @@ def test_an_env_says_how_many_steps_an_episode_may_last():
     env.close()
 
 
+@pytest.mark.slow
 def test_an_env_takes_its_task_section_from_the_config_unless_given_one():
     from roshan.config import FlyConfig
 

@@ -39,6 +39,7 @@ def planner_actions(env) -> np.ndarray:
 
 @pytest.mark.parametrize(("make", "actions"), [(fly_env, fly_actions), (planner_env, planner_actions)],
                          ids=["fly", "planner"])
+@pytest.mark.slow
 def test_a_closed_env_refuses_step_reset_and_render(make, actions):
     env = make()
     env.reset(seed=1)

@@ -75,6 +75,7 @@ def test_simulate_with_drones_refuses_a_1x1_map_with_one_line():
     assert "success rate" not in r.output
 
 
+@pytest.mark.slow
 def test_a_firefighting_episode_without_any_fire_never_succeeds():
     cfg = Config(ignition=NO_FIRE, drones=DroneConfig(num_drones=1), wind=WindConfig(speed=0.0))
     with pytest.warns(UserWarning, match=r"ignition.fire_percentage = 0 lights no fire at a reset"):
@@ -86,6 +87,7 @@ def test_a_firefighting_episode_without_any_fire_never_succeeds():
     env.close()
 
 
+@pytest.mark.slow
 def test_a_planner_episode_without_any_fire_never_succeeds():
     cfg = Config(ignition=NO_FIRE, drones=DroneConfig(num_drones=2), wind=WindConfig(speed=0.0))
     with pytest.warns(UserWarning, match=r"PlannerVectorEnv \(greedy\): ignition.fire_percentage = 0"):
@@ -97,6 +99,7 @@ def test_a_planner_episode_without_any_fire_never_succeeds():
     env.close()
 
 
+@pytest.mark.slow
 def test_the_simple_flyagent_needs_no_fire():
     # its objective is a goal (a fire or a corner): a small map without fires stays valid
     env = FlyVectorEnv(1, uniform(8, 8, drones=DroneConfig(num_drones=1)))

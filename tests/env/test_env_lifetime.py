@@ -93,6 +93,7 @@ def test_500_fly_envs_built_and_closed_reuse_memory_fields_and_kernels():
     assert max(seconds) < REBUILD_S, f"slowest rebuild {max(seconds):.2f} s (median {np.median(seconds):.3f} s)"
 
 
+@pytest.mark.slow
 def test_envs_alive_together_each_hold_their_own_simulators():
     a, b = FlyVectorEnv(2, SMALL), FlyVectorEnv(2, SMALL)
     assert a.fire is not b.fire and a.kernels is not b.kernels
@@ -104,6 +105,7 @@ def test_envs_alive_together_each_hold_their_own_simulators():
         env.close()
 
 
+@pytest.mark.slow
 def test_live_envs_still_stop_before_the_field_tree_limit(monkeypatch):
     live = [FlyVectorEnv(2, SMALL) for _ in range(pool.pooled_count() + 1)]  # the pool has none left now
     used = runtime.field_trees()
@@ -116,6 +118,7 @@ def test_live_envs_still_stop_before_the_field_tree_limit(monkeypatch):
         env.close()
 
 
+@pytest.mark.slow
 def test_rendering_a_rebuilt_env_allocates_nothing():
     env = FlyVectorEnv(2, SMALL)
     env.reset(seed=1)
@@ -148,6 +151,7 @@ def planner_actions(env, step: int) -> np.ndarray:
     return (np.arange(env.num_envs * env.num_drones).reshape(env.num_envs, env.num_drones) + step) % 3
 
 
+@pytest.mark.slow
 def test_20_planner_envs_rebuild_without_compiling_and_replay_a_fresh_one():
     fresh = planner_env()
     expected = record(fresh, 10, planner_actions, seed=3)

@@ -15,6 +15,7 @@ from roshan.maps import BURNED, BURNING, FLOODED, load_map
 FAST = FireConfig(uniform_ignition_time=1.0, uniform_burning_time=3.0)
 
 
+@pytest.mark.slow
 def test_ever_lit_equals_the_final_cells_of_an_episode():
     cfg = Config(map=MapConfig(name="uniform", uniform_rows=16, uniform_cols=16), fire=FAST,
                  ignition=IgnitionConfig(fire_percentage=0.02), drones=DroneConfig(num_drones=1),

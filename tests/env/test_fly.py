@@ -56,6 +56,7 @@ def test_time_limit_matches_the_worked_values(rows, cols, version, policy, pct, 
     assert time_limit(rows, cols, 10.0, 0.1, 10.0, pct, FlyConfig(policy=policy, time_limit=version)) == expected
 
 
+@pytest.mark.slow
 def test_progress_pays_improvements_only():
     env = make_env()
     scene(env, [[100.0, 100.0]], [[10.5, 20.5]])
@@ -94,6 +95,7 @@ def test_boundary_exit_after_two_steps_outside():
     assert info["episode_stats"]["success"][0].item() == 0.0
 
 
+@pytest.mark.slow
 def test_timeout_truncates_with_the_penalty():
     fly = FlyConfig(k_turn=0.01)
     env = make_env(fly=fly)
@@ -109,6 +111,7 @@ def test_timeout_truncates_with_the_penalty():
     assert r[0, 0].item() == pytest.approx(-1.0)
 
 
+@pytest.mark.slow
 def test_collision_terminates_with_penalty_and_proximity():
     env = make_env(num_drones=2, fly=FlyConfig(collision=True))
     scene(env, [[150.0, 150.0], [153.0, 150.0]], [[30.5, 30.5], [30.5, 5.5]])  # 3 m apart < 4 m
@@ -130,6 +133,7 @@ def complex_scene(sticky):
     return env, cols
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sticky", [False, True])
 def test_extinguish_pays_once_unless_the_original_sticky_flag_is_reproduced(sticky):
     env, cols = complex_scene(sticky)
@@ -152,6 +156,7 @@ def test_putting_out_the_last_fire_succeeds():
     assert info["episode_stats"]["extinguished"][0].item() == 2.0
 
 
+@pytest.mark.slow
 def test_greedy_assignment_takes_the_nearest_unreserved_fire_then_the_groundstation():
     env = make_env(num_drones=3)
     cols = env.fire.cols
@@ -165,6 +170,7 @@ def test_greedy_assignment_takes_the_nearest_unreserved_fire_then_the_groundstat
     assert env.drones.goal_cell.to_numpy()[0].tolist() == [12 * cols + 10, 10 * cols + 13, -1]
 
 
+@pytest.mark.slow
 def test_observation_features_against_a_hand_computation():
     env = make_env(num_drones=2)
     scene(env, [[100.0, 100.0], [130.0, 100.0]], [[14.0, 13.0], [20.0, 20.0]])
@@ -185,6 +191,7 @@ def test_observation_features_against_a_hand_computation():
     np.testing.assert_allclose(obs["agent"][0, 0, 1].numpy(), before.numpy())  # frames shift, 0 = newest
 
 
+@pytest.mark.slow
 def test_step_returns_the_same_tensors_and_writes_into_them():
     env = make_env(num_drones=2, envs=3, ignition=IgnitionConfig(fire_percentage=0.02))
     obs, _ = env.reset(seed=1)
@@ -197,6 +204,7 @@ def test_step_returns_the_same_tensors_and_writes_into_them():
     assert r.shape == (3, 2) and term.shape == (3,) and term.dtype == torch.bool
 
 
+@pytest.mark.slow
 def test_bad_actions_are_rejected_with_env_and_drone():
     env = make_env(num_drones=2, envs=2)
     bad = np.zeros((2, 2, 2), np.float32)
@@ -215,6 +223,7 @@ def test_out_of_range_actions_are_clipped():
     assert torch.equal(oa, ob)
 
 
+@pytest.mark.slow
 def test_same_seed_same_trajectory():
     def rollout(seed):
         env = make_env(num_drones=2, envs=2, fly=FlyConfig(policy="complex"),
@@ -241,6 +250,7 @@ def test_a_real_end_on_the_last_allowed_step_terminates_instead_of_truncating():
     assert REASONS[int(info["episode_stats"]["reason"][0])] == "timeout"  # the precedence of docs/model/agents.md §9
 
 
+@pytest.mark.slow
 def test_step_before_reset_is_an_error():
     import gymnasium as gym
 
@@ -249,6 +259,7 @@ def test_step_before_reset_is_an_error():
         env.step(np.zeros((1, 1, 2), np.float32))
 
 
+@pytest.mark.slow
 def test_one_env_flies_as_env_0_of_a_batch():
     """E = 1 runs its kernels serially on the calling thread (roshan.kernels.fire_layout.env_loop_serial), a batch
     through Taichi's thread pool; env 0's trajectory, episode ends and autoresets included, is the same."""

@@ -40,6 +40,7 @@ def planner_env():
     env.close()
 
 
+@pytest.mark.slow
 def test_planner_frame_draws_every_explorer_where_it_flies(planner_env):
     env = planner_env
     frame = env._viewer.render()  # the map alone
@@ -77,6 +78,7 @@ def test_planner_frame_has_a_caption_above_and_a_legend_below_the_map(planner_en
     env.caption_name = env.default_caption_name
 
 
+@pytest.mark.slow
 def test_fly_frame_legend_has_no_explorers_nor_unseen_fires():
     env = FlyVectorEnv(num_envs=1, config=CFG, seed=1)
     env.reset(seed=1)
@@ -176,6 +178,7 @@ def test_put_out_cells_are_one_colour_whatever_the_land_below():
     assert EXTINGUISHED_COLOUR != CLASSES[10].colour  # not Water's blue
 
 
+@pytest.mark.slow
 def test_the_legend_names_the_land_cover_and_tells_sealed_from_burned_out():
     env = FlyVectorEnv(num_envs=1, config=Config(map=MapConfig(name="35x36_Woods"), drones=DroneConfig(num_drones=2)),
                        seed=1)
@@ -190,6 +193,7 @@ def test_the_legend_names_the_land_cover_and_tells_sealed_from_burned_out():
     env.close()
 
 
+@pytest.mark.slow
 def test_caption_episode_is_the_episodes_csv_number(tmp_path):
     from roshan.runs.evaluate import baseline_fn, run_episodes
     from roshan.runs.report.files import read_episodes_csv, write_episodes_csv
@@ -214,6 +218,7 @@ def test_a_trained_runs_caption_names_the_level_and_the_run_folder(tmp_path, mon
     assert caption_name("FlyAgent", Path("/elsewhere/runs/fly")) == "FlyAgent from fly"
 
 
+@pytest.mark.slow
 def test_simulate_frames_have_a_caption_and_a_legend(tmp_path):
     from click.testing import CliRunner
 

@@ -54,6 +54,7 @@ def test_time_limit_matches_the_worked_values(version, pct, expected):
     assert planner_time_limit(35, 36, 10.0, 0.1, 10.0, pct, version) == expected
 
 
+@pytest.mark.slow
 def test_actions_become_goals_and_index_zero_or_padding_is_the_groundstation():
     env = make_env(same=-1.0)
     n, cand = candidates(env)
@@ -69,6 +70,7 @@ def test_actions_become_goals_and_index_zero_or_padding_is_the_groundstation():
     assert np.all(np.abs(cand[1:] - np.floor(cand[1:]) - 0.5) < 1e-4)  # fire candidates are cell centres
 
 
+@pytest.mark.slow
 def test_bad_actions_name_the_problem():
     env = make_env()
     with pytest.raises(ValueError, match="expected shape"):
@@ -87,6 +89,7 @@ def test_same_goal_penalty_counts_drones_beyond_the_distinct_goals(actions, dupl
     assert r.tolist() == pytest.approx([-float(duplicates)] * 2)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("actions, expected", [([1, 2, 3, 4], 0.0), ([0, 2, 3, 4], -1.0), ([0, 0, 0, 1], -1.0)])
 def test_groundstation_term_is_paid_once_per_decision_in_the_thesis_code(actions, expected):
     env = make_env(ground=-1.0)
@@ -94,6 +97,7 @@ def test_groundstation_term_is_paid_once_per_decision_in_the_thesis_code(actions
     assert r.tolist() == pytest.approx([expected] * 2)
 
 
+@pytest.mark.slow
 def test_extinguish_term_pays_each_cell_put_out_in_the_interval():
     env = make_env(interval=1, extinguish=1.0)
     put_out = np.zeros(2)
@@ -107,6 +111,7 @@ def test_extinguish_term_pays_each_cell_put_out_in_the_interval():
     np.testing.assert_allclose(total, put_out)
 
 
+@pytest.mark.slow
 def test_timeout_truncates_and_pays_the_timeout_term():
     env = make_env(timeout=-1.0)
     env.kernels.remaining.from_numpy(np.array([1, 500], np.int32))
@@ -147,6 +152,7 @@ def test_newest_terms_add_distance_and_spread():
     assert got == pytest.approx(want, rel=1e-5)
 
 
+@pytest.mark.slow
 def test_evaluation_candidates_are_the_fires_some_drone_has_seen():
     env = make_env(evaluation=True)
     for _ in range(3):
@@ -171,6 +177,7 @@ def test_training_candidates_are_all_burning_cells_in_row_major_order():
     assert np.all(np.diff(flat) > 0)
 
 
+@pytest.mark.slow
 def test_greedy_and_planner_evaluations_see_identical_fire_layouts():
     planner = make_env(evaluation=True, seed=11)
     greedy = make_env(evaluation=True, controller="greedy", seed=11)
@@ -198,6 +205,7 @@ def test_greedy_heuristic_sends_drones_to_known_fires_without_sharing_one():
             assert len(held) == 4  # nobody waits at the groundstation while free fires are known
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("home", ["original", "fixed"])
 def test_greedy_fire_on_the_groundstation_cell_is_put_out_only_with_the_fix(home):
     # docs/model/agents.md §10.2: the fire's centre equals the groundstation's, so the original's "wait at the
@@ -219,11 +227,13 @@ def test_greedy_fire_on_the_groundstation_cell_is_put_out_only_with_the_fix(home
     env.close()
 
 
+@pytest.mark.slow
 def test_a_planner_step_counts_interval_physics_steps():
     env = make_env(interval=4)
     assert env.physics_steps_per_step == 4 and env.max_env_steps == -(-env.t_max // 4)
 
 
+@pytest.mark.slow
 def test_the_planner_env_takes_its_section_from_the_config_unless_given_one():
     pc = PlannerConfig(interval=3, fly_model=MODEL, explorer_model=MODEL, num_explorers=1)
     cfg = Config(ignition=FIRES, drones=DroneConfig(num_drones=2), planner=pc)

@@ -15,6 +15,7 @@ from tests.conftest import make_map
 SMALL = Config(map=MapConfig(name="uniform", uniform_rows=8, uniform_cols=8), drones=DroneConfig(num_drones=1))
 
 
+@pytest.mark.slow
 def test_an_env_built_before_reset_taichi_refuses_to_step():
     env = FlyVectorEnv(1, SMALL)
     env.reset(seed=0)

@@ -90,6 +90,7 @@ def test_defaults_keep_the_infinite_tank_and_one_physics_step_per_action():
 # ---------------------------------------------------------------------------------------------- water
 
 
+@pytest.mark.slow
 def test_each_drop_costs_one_unit_and_an_empty_tank_cannot_extinguish():
     env = make_env(WATER, COMPLEX)
     gs, step = inward(env)
@@ -167,6 +168,7 @@ def test_complex_policy_sends_an_empty_drone_home_and_back_to_the_fires():
 # ---------------------------------------------------------------------------------------------- frame skips
 
 
+@pytest.mark.slow
 def test_one_action_runs_frame_skips_fire_updates_and_physics_steps():
     env = make_env(DroneConfig(num_drones=1), SKIPPING)
     assert env.t_max == time_limit(35, 36, 10.0, 0.1, 10.0, 0.0, SKIPPING) == 24, "T_max counts physics steps"

@@ -161,6 +161,7 @@ def test_a_missing_config_file_is_named(tmp_path):
         load_spec(path)
 
 
+@pytest.mark.slow
 def test_the_thesis_spec_still_means_what_its_journal_ran(tmp_path):
     """The committed spec against the runs its journal recorded: a row rewritten (e.g. with a ``base``) must keep
     every started run's settings, or ``roshan experiment run`` would refuse the journal."""
@@ -316,6 +317,7 @@ def test_waiting_runs_of_a_removed_condition_are_dropped_and_a_spec_that_has_the
     assert progress(study)["waiting"] == 6
 
 
+@pytest.mark.slow
 def test_the_readme_report_command_gives_the_committed_report(tmp_path):
     """On a fresh clone `roshan experiment report configs/experiments/thesis.yaml --out out/thesis` (the README's
     command) reads the committed journal and writes the committed report, table for table. The journal is read
@@ -333,6 +335,7 @@ def test_the_readme_report_command_gives_the_committed_report(tmp_path):
             "`roshan experiment report configs/experiments/thesis.yaml --out benchmarks/results/thesis`")
 
 
+@pytest.mark.slow
 def test_a_spec_names_its_storage_and_the_report_finds_it_from_any_root(tmp_path):
     """The thesis spec names its committed journal, so the README's report command works on a fresh clone."""
     journal = tmp_path / "committed" / "experiment.journal"
@@ -491,6 +494,7 @@ def test_a_bad_finding_is_refused_naming_it(tmp_path, check, message):
 # ------------------------------------------------------------------------------------------ a real run
 
 
+@pytest.mark.slow
 def test_the_command_trains_evaluates_and_reports_a_tiny_experiment(tmp_path):
     spec = tmp_path / "tiny.yaml"
     spec.write_text(f"""
@@ -550,6 +554,7 @@ def fire_layouts(cfg, num_envs: int, seed: int, episodes: int) -> set[bytes]:
         env.close()
 
 
+@pytest.mark.slow
 def test_the_e7_buffer_shares_no_fire_layout_with_its_evaluation():
     """E7 learns offline from a buffer: its episodes must not be the ones it is evaluated on. The buffer's ~200k
     transitions take ~3 episodes in each of its 50 envs and the evaluation's 200 episodes ~4 in each of 50; 6 each
@@ -568,6 +573,7 @@ def test_the_e7_buffer_shares_no_fire_layout_with_its_evaluation():
 REPRODUCED = "E1_ppo"  # a cheap row (~15 s a seed) rerun at the code of commit 69c2998 (`--rerun E1_ppo`)
 
 
+@pytest.mark.slow
 def test_a_committed_cheap_row_is_reproduced_by_this_code(tmp_path):
     """Results are claims about code: rerunning a finished seed of a cheap committed row here gives its figures
     exactly (same machine kind). A change of behaviour fails this; then rerun the row (`roshan experiment run

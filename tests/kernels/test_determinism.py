@@ -32,14 +32,17 @@ def same(a, b):
     return all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
 
 
+@pytest.mark.slow
 def test_same_seed_gives_identical_states():
     assert same(snapshot(run(3, 7), 3), snapshot(run(3, 7), 3))
 
 
+@pytest.mark.slow
 def test_env_trajectory_does_not_depend_on_batch_size():
     assert same(snapshot(run(1, 7), 1), snapshot(run(4, 7), 1))
 
 
+@pytest.mark.slow
 def test_seeds_and_envs_get_different_streams():
     sim = run(2, 7, steps=0)
     other = run(2, 8, steps=0)
@@ -48,6 +51,7 @@ def test_seeds_and_envs_get_different_streams():
     assert not np.array_equal(s0, other.state(0)), "seeds must differ"
 
 
+@pytest.mark.slow
 def test_reset_mask_resets_only_the_chosen_envs():
     sim = run(3, 5, steps=1500)
     before = snapshot(sim, 3)
@@ -83,6 +87,7 @@ SCRIPT = textwrap.dedent("""
 
 @pytest.mark.parametrize("layout,parallel", [("dense", "envs"), ("sparse", "envs"), ("dense", "chunks"),
                                              ("sparse", "chunks")])
+@pytest.mark.slow
 def test_bit_identical_across_thread_counts(layout, parallel):
     digests = [subprocess.run([sys.executable, "-c", SCRIPT, str(t), layout, parallel], capture_output=True,
                               text=True, check=True).stdout.strip().splitlines()[-1] for t in (1, 2)]

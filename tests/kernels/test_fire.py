@@ -25,6 +25,7 @@ def states(sim):
     return sim.states()
 
 
+@pytest.mark.slow
 def test_burned_cells_never_reignite_and_burning_cells_burn_out():
     sim = FireSim(load_map("21x21_Field"), ignition=IgnitionConfig(fire_percentage=0.2), num_envs=4, seed=3)
     sim.reset()
@@ -86,6 +87,7 @@ def test_strong_wind_spreads_fire_further_downwind_than_upwind():
     assert east > 2 * west + 10, (east, west)
 
 
+@pytest.mark.slow
 def test_a_burning_cell_burns_out_after_its_randomised_duration():
     sim = FireSim(make_map(np.full((5, 5), 2)), NO_PARTICLES, ignition=NO_FIRE, num_envs=6, seed=11)
     sim.reset()
@@ -111,6 +113,7 @@ def test_a_burning_cell_burns_out_after_its_randomised_duration():
     assert done.tolist() == expected
 
 
+@pytest.mark.slow
 def test_particles_die_out_once_nothing_burns():
     sim = FireSim(load_map("15x15_Woods"), ignition=IgnitionConfig(fire_percentage=0.05), num_envs=2, seed=4)
     sim.reset()
@@ -143,6 +146,7 @@ def test_flooding_extinguishes_then_the_cell_returns_to_its_class():
     assert sim.stats()["extinguished"][0] == 1
 
 
+@pytest.mark.slow
 def test_pool_overflow_is_counted_not_silent():
     sim = FireSim(load_map("21x21_Field"), FireConfig(conv_capacity=3, rad_capacity=2),
                   ignition=IgnitionConfig(fire_percentage=0.3), num_envs=2, seed=1)
@@ -165,6 +169,7 @@ def test_generator_lights_the_requested_number_of_fires(pattern):
     assert sim.stats()["initial_fires"].tolist() == [expected] * 6
 
 
+@pytest.mark.slow
 def test_thesis_era_generator_lights_at_most_the_requested_fires():
     # docs/model/fire.md §11: without re-seeding each cluster is a self-avoiding walk that stops when trapped. A port of
     # the thesis-era C++ generator lights a median of ~180-200 of the 441 fires (35 %, 2 clusters, 35x36_Woods).
@@ -188,6 +193,7 @@ def test_clusters_are_compact():
         assert span.prod() < 0.25 * land.rows * land.cols, "one cluster should not be scattered over the map"
 
 
+@pytest.mark.slow
 def test_fixed_wind_direction_gives_the_wind_vector():
     sim = FireSim(load_map("15x15_Woods"), wind=WindConfig(speed=8.0, direction=90.0), num_envs=2, seed=0)
     sim.reset()
@@ -209,6 +215,7 @@ def test_uniform_map_takes_its_times_from_the_config():
     assert np.all((timers[..., 0] >= 16.0 - 1e-6) & (timers[..., 0] <= 24.0 + 1e-6))
 
 
+@pytest.mark.slow
 def test_cell_durations_are_the_same_whenever_they_are_drawn():
     # Durations are drawn when a cell is first exposed or lit, not at reset: the counter-based draw must give
     # the values an eager draw at reset gives, and a new episode must draw new ones.
@@ -232,6 +239,7 @@ def test_cell_durations_are_the_same_whenever_they_are_drawn():
     assert np.mean(timers_next[..., T_BURN_LEFT] != timers_eager[..., T_BURN_LEFT]) > 0.5, "a new episode redraws"
 
 
+@pytest.mark.slow
 def test_a_simulator_whose_streams_restart_replays_a_fresh_one_with_that_seed():
     land = make_map(np.full((8, 8), 2))
     ignition = IgnitionConfig(fire_percentage=0.1, pattern="scattered")

@@ -22,6 +22,7 @@ def run_with_water_and_a_reset(layout: str, pattern: str, **fire) -> FireSim:
     return sim
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("pattern", ["cluster", "ring", "scattered"])
 def test_the_sparse_layout_gives_the_dense_trajectory(pattern):
     dense = run_with_water_and_a_reset("dense", pattern)
@@ -35,6 +36,7 @@ def test_the_sparse_layout_gives_the_dense_trajectory(pattern):
     assert np.all(s_stats["blocks"] > 0) and np.all(d_stats["blocks"] == 0)
 
 
+@pytest.mark.slow
 def test_memory_follows_the_footprint_and_a_reset_hands_the_blocks_back():
     sim = FireSim(load_map("81x129_Campsite"), FireConfig(layout="sparse"),
                   ignition=IgnitionConfig(fire_percentage=0.01), num_envs=2, seed=3)
@@ -53,6 +55,7 @@ def test_memory_follows_the_footprint_and_a_reset_hands_the_blocks_back():
     assert (state == BURNING).sum() == sim.stats()["initial_fires"][0]
 
 
+@pytest.mark.slow
 def test_a_full_block_pool_is_counted_not_silent():
     sim = FireSim(load_map("54x71_Woods"), FireConfig(layout="sparse", block_capacity=3),
                   ignition=IgnitionConfig(fire_percentage=0.05), num_envs=2, seed=1)

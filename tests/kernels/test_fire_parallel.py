@@ -25,6 +25,7 @@ def run(parallel: str, pct: float = 0.05, **fire) -> FireSim:
     return sim
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("layout", ["dense", "sparse"])
 @pytest.mark.parametrize("pct", [0.05, 0.35])
 def test_the_chunked_update_gives_the_serial_trajectory(layout, pct):
@@ -36,6 +37,7 @@ def test_the_chunked_update_gives_the_serial_trajectory(layout, pct):
     assert_same_fire(serial, chunked)
 
 
+@pytest.mark.slow
 def test_full_pools_drop_the_same_emissions_and_blocks():
     """Pools too small for the fire: the chunked update drops exactly what the serial one drops."""
     small = {"layout": "sparse", "block_capacity": 12, "conv_capacity": 24, "rad_capacity": 24}

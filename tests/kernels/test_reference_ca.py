@@ -5,6 +5,7 @@ cells, so every transition (exposure, pruning, ignition, burning, burn-out, floo
 """
 
 import numpy as np
+import pytest
 
 from roshan.config import ConvectionConfig, FireConfig, IgnitionConfig, RadiationConfig
 from roshan.kernels.fire import T_BURN_LEFT, T_BURN_TIME, T_EXPOSURE, T_FLOOD, T_IGN, FireSim
@@ -69,6 +70,7 @@ class NumpyCA:
                 self.burning.discard(c)
 
 
+@pytest.mark.slow
 def test_kernel_cell_state_machine_matches_numpy_reference():
     rng = np.random.default_rng(42)
     rows, cols, envs = 12, 12, 2

@@ -38,6 +38,7 @@ def run(tmp_path_factory) -> Path:
     return root / "r"
 
 
+@pytest.mark.slow
 def test_resume_with_another_optimiser_family_is_refused(run):
     before = (run / "config.yaml").read_text()
     out = refused(cli("train", "--resume", run, "--no-eval", "--quiet", "--set", "ppo.optim.name=sgd",

@@ -75,6 +75,7 @@ def replay(make, actions):
 
 @pytest.mark.parametrize("make, act", [(make_fly, greedy_fly), (make_greedy, greedy_planner),
                                        (make_planner, planner_random_fn(SEED))], ids=["fly", "greedy", "planner"])
+@pytest.mark.slow
 def test_frames_run_from_the_reset_to_the_final_state_of_one_episode(make, act, tmp_path):
     frames, actions, record = evaluate_with_frames(make, act, tmp_path)
     first, final, next_first = replay(make, actions)

@@ -1,6 +1,7 @@
 """Frame reuse is exact: cached acting and sequence minibatches give the same network outputs as encoding every
 stacked observation, on real rollouts of the collision env (episodes restart inside the rollout)."""
 
+import pytest
 import torch
 
 from roshan.algos.agents import fly_ppo
@@ -32,6 +33,7 @@ def test_gather_stacks_picks_rows():
     assert out.tolist() == [[[4.0, 2.0], [7.0, 7.0]], [[0.0, 0.0], [3.0, 5.0]]]
 
 
+@pytest.mark.slow
 def test_cached_acting_and_sequence_minibatches_match_full_encoding():
     torch.manual_seed(0)
     cfg = collision_run()

@@ -4,6 +4,7 @@ with the thesis-style comparison and the {"policy", "greedy"} JSON."""
 import json
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 from roshan.checkpoints import checkpoint_path, load_checkpoint
@@ -22,6 +23,7 @@ def cli(*args):
     return CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
 
 
+@pytest.mark.slow
 def test_planner_trains_resumes_and_evaluates_against_greedy_on_the_same_episodes(tmp_path):
     res = cli("train", ROOT / "configs/planner.yaml", "--root", tmp_path, "--name", "p", "--no-eval", "--quiet",
               *TINY, "--set", "train.max_updates=2")

@@ -47,6 +47,7 @@ def test_train_writes_the_run_folder_and_resume_continues(tmp_path):
     assert after["seconds"] > first["seconds"]
 
 
+@pytest.mark.slow
 def test_sigkill_mid_run_then_resume(tmp_path):
     """Kill -9 a training process while it writes checkpoints; the latest one loads and the run resumes from it
     with its counters."""
@@ -113,6 +114,7 @@ def test_eval_of_a_folder_without_checkpoints(tmp_path):
     assert res.exit_code != 0 and "no checkpoints" in res.output
 
 
+@pytest.mark.slow
 def test_shipped_simple_model_evaluates_and_writes_files(tmp_path):
     out, js = tmp_path / "eval", tmp_path / "e.json"
     res = cli("eval", ROOT / "models/fly_simple", "--episodes", 20, "--envs", 10, "--seed", 1, "--out", out,
@@ -128,6 +130,7 @@ def test_shipped_simple_model_evaluates_and_writes_files(tmp_path):
     assert "Success rate" in res.output
 
 
+@pytest.mark.slow
 def test_eval_is_repeatable_under_a_seed(tmp_path):
     a, b = tmp_path / "a.json", tmp_path / "b.json"
     for js in (a, b):
@@ -139,6 +142,7 @@ def test_eval_is_repeatable_under_a_seed(tmp_path):
     assert results[0] == results[1]
 
 
+@pytest.mark.slow
 def test_td3_and_iql_run_end_to_end(tmp_path):
     res = cli("train", ROOT / "configs/td3_simple.yaml", "--root", tmp_path, "--name", "td3", "--quiet",
               "--set", "sim.envs=4", "--set", "td3.min_memory_size=256", "--set", "train.max_updates=2",
@@ -158,6 +162,7 @@ def test_td3_and_iql_run_end_to_end(tmp_path):
     assert torch.is_tensor(next(iter(state["agent"]["actor"].values())))
 
 
+@pytest.mark.slow
 def test_auto_train_seeds_and_periodic_evaluation(tmp_path):
     from roshan.runs.report.scalars import read_tensorboard_scalars
 

@@ -4,6 +4,7 @@ evaluation episode at every periodic evaluation, the thesis metrics of each eval
 import io
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 from PIL import Image
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
@@ -24,6 +25,7 @@ def events(folder: Path) -> EventAccumulator:
     return acc
 
 
+@pytest.mark.slow
 def test_a_tiny_run_logs_config_hparams_video_and_evaluation_metrics(tmp_path):
     res = CliRunner().invoke(main, ["train", str(ROOT / "configs/fly_simple.yaml"), "--root", str(tmp_path),
                                     "--name", "tb", "--no-eval", *TINY], catch_exceptions=False)

@@ -271,6 +271,7 @@ def test_each_worker_shows_its_trial_on_its_own_line(capsys):
 # ------------------------------------------------------------------------------------------------ pruning
 
 
+@pytest.mark.slow
 def test_a_trial_below_the_median_is_pruned_and_train_stops_cleanly(tmp_path):
     recipe = make_recipe(CONFIG, TINY, _space_file(tmp_path), trials=2, prune_startup=1, prune_warmup=0)
     storage = optuna.storages.InMemoryStorage()
@@ -379,6 +380,7 @@ def check_study_survived_the_kill(study: optuna.Study, killed: dict, log: str) -
         assert sorted(t.intermediate_values) == [1, 2]  # the training objective after each update
 
 
+@pytest.mark.slow
 def test_two_workers_share_a_journal_study_and_survive_a_killed_worker(tmp_path):
     study, killed, log = run_study_killing_a_worker(tmp_path, "s", None)
     check_study_survived_the_kill(study, killed, log)
@@ -391,6 +393,7 @@ def test_two_workers_share_a_journal_study_and_survive_a_killed_worker(tmp_path)
     assert "top2_mean.yaml" in r.output and (tmp_path / "s" / "report" / "history.png").is_file()
 
 
+@pytest.mark.slow
 def test_a_killed_study_resumes_where_it_stopped(tmp_path):
     proc = launch(tmp_path, "k", "--trials", "1")
     journal, log = tmp_path / "k" / "study.journal", tmp_path / "k.log"
@@ -414,6 +417,7 @@ def test_a_killed_study_resumes_where_it_stopped(tmp_path):
     assert "trial 1: success = " in r.output and "best: trial 1" in r.output
 
 
+@pytest.mark.slow
 def test_a_journal_with_a_cut_last_record_is_named_and_repaired_by_resume(tmp_path):
     sets = sum((["--set", s] for s in TINY), [])
     r = CliRunner().invoke(main, ["study", str(CONFIG), "--space", str(_space_file(tmp_path)), "--trials", "1",
@@ -455,6 +459,7 @@ def test_a_journal_damaged_before_its_last_line_is_refused_with_the_line(tmp_pat
     assert journal.read_bytes() == damaged and not list(tmp_path.glob("*.damaged-*"))
 
 
+@pytest.mark.slow
 def test_ctrl_c_fails_the_running_trial_and_queues_it_again(tmp_path):
     proc = launch(tmp_path, "c", "--trials", "1")
     journal, log = tmp_path / "c" / "study.journal", tmp_path / "c.log"
@@ -521,6 +526,7 @@ def postgres_url():
         shutil.rmtree(base, ignore_errors=True)
 
 
+@pytest.mark.slow
 def test_two_workers_share_a_postgresql_study_and_survive_a_killed_worker(tmp_path, postgres_url):
     name = f"roshan-test-{uuid.uuid4().hex[:8]}"
     try:
