@@ -109,8 +109,8 @@ class EnergyConfig(Section):
     capacity: float | None = num(None, 0.0, lo_open=True, doc="battery energy (J)")
     hover_power: float | None = num(None, 0.0, doc="power drawn hovering with an empty tank (W)")
     speed_power: float | None = num(None, 0.0, doc="extra power per (m/s)^2 of ground speed (W s^2 / m^2)")
-    payload_power: float | None = num(None, 0.0, doc="extra power with a full tank, scaled by its fill (W; the "
-                                                     "water limit only)")
+    payload_power: float | None = num(None, 0.0, doc="extra power with a full tank (W), scaled by the tank's fill "
+                                                     "with the water limit (else always full)")
     swap_time: float | None = num(None, 0.0, doc="seconds on the groundstation cell to swap in a full battery")
 
     @property
