@@ -116,13 +116,33 @@ class ThesisPlannerNet(nn.Module):
         return allowed
 
     def attend(self, obs: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Attention weights averaged over heads (B, N, K), attention output (B, N, H) and the mask (B, K)."""
+        """Attention weights averaged over heads (B, N, K), attention output (B, N, H) and the mask (B, K).
+
+        The same function as ``self.attn(query, fires, fires, key_padding_mask=...)`` on the embedded fires,
+        computed in the fires' 2 coordinates instead of H: the fire embedding and the key and value projections
+        are affine with nothing between them, so a head's score is q.(A x + c) = (A^T q).x + q.c, whose second
+        term is the same for every candidate and cancels in the softmax, and its output is A_v (sum_j w_j x_j)
+        + c_v because the weights sum to 1. That is H/2 = 32x less work over the candidate list, which dominated
+        a planner update. The parameters (and checkpoints) are nn.MultiheadAttention's; the outputs agree with
+        it to float rounding (tests/algos/test_planner_algo.py).
+        """
         allowed = self.allowed(obs["fires_mask"])
         query = self.pos_emb(obs["drones"]) + self.goal_emb(obs["goals"]) + self.id_emb(self.drone_ids)
-        fires = self.fire_emb(obs["fires"])
-        out, weights = self.attn(query, fires, fires, key_padding_mask=~allowed, need_weights=True,
-                                 average_attn_weights=True)
-        return weights, out, allowed
+        B, N, H = query.shape
+        heads = self.attn.num_heads
+        size = H // heads
+        w_q, w_k, w_v = self.attn.in_proj_weight.chunk(3)
+        b_q, _, b_v = self.attn.in_proj_bias.chunk(3)
+        w_f, b_f = self.fire_emb.weight, self.fire_emb.bias  # (H, 2), (H,)
+        q = F.linear(query, w_q, b_q).view(B, N, heads, size) / math.sqrt(size)
+        key_map = (w_k @ w_f).view(heads, size, 2)  # fire coordinates -> each head's keys
+        value_map, value_bias = (w_v @ w_f).view(heads, size, 2), (w_v @ b_f + b_v).view(heads, size)
+        scores = torch.einsum("bnhc,bkc->bhnk", torch.einsum("bnhs,hsc->bnhc", q, key_map), obs["fires"])
+        weights = torch.softmax(scores.masked_fill(~allowed[:, None, None, :], float("-inf")), -1)
+        pooled = torch.einsum("bhnk,bkc->bnhc", weights, obs["fires"])  # each head's mean candidate
+        out = self.attn.out_proj(
+            (torch.einsum("bnhc,hsc->bnhs", pooled, value_map) + value_bias).reshape(B, N, H))
+        return weights.mean(1), out, allowed
 
     def probs(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         """(B, N, K) per-drone probabilities as the reference defines them (exactly 0 where masked)."""

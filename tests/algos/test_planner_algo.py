@@ -86,6 +86,47 @@ def test_thesis_net_masks_padding_and_the_groundstation_while_a_fire_is_listed()
     assert bool((actions[n_valid == 1] == 0).all()) and bool((actions[n_valid > 1] != 0).all())
 
 
+def reference_attention(net: ThesisPlannerNet, obs: dict):
+    """The thesis net's attention as nn.MultiheadAttention computes it on the embedded fires (the H-wide
+    projections that ``attend`` avoids)."""
+    allowed = net.allowed(obs["fires_mask"])
+    query = net.pos_emb(obs["drones"]) + net.goal_emb(obs["goals"]) + net.id_emb(net.drone_ids)
+    fires = net.fire_emb(obs["fires"])
+    out, weights = net.attn(query, fires, fires, key_padding_mask=~allowed, need_weights=True,
+                            average_attn_weights=True)
+    return weights, out
+
+
+def test_thesis_attention_in_fire_coordinates_is_multihead_attention_with_its_gradients():
+    """attend() works in the fires' 2 coordinates; weights, output and every parameter's gradient are
+    nn.MultiheadAttention's to float rounding, with non-zero biases and a batch of uneven candidate lists."""
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(4)
+    net = ThesisPlannerNet(3)
+    with torch.no_grad():
+        for p in net.parameters():
+            p.add_(0.3 * torch.randn(p.shape, generator=g))
+    obs = random_obs(40, 3, 30, g)
+    obs["fires_mask"][:2, 1:] = 0.0  # rows with no fire: the groundstation alone
+    actions = torch.randint(0, 3, (40, 3), generator=g)
+
+    def grads(attention):
+        net.zero_grad()
+        weights, out = attention()
+        loss = weights.clamp_min(1e-8).log().gather(-1, actions.unsqueeze(-1)).sum() + net.value_head(out).sum()
+        loss.backward()
+        return weights.detach(), out.detach(), {n: p.grad.clone() for n, p in net.named_parameters()
+                                                 if p.grad is not None}
+
+    w_ref, out_ref, g_ref = grads(lambda: reference_attention(net, obs))
+    w, out, g_new = grads(lambda: net.attend(obs)[:2])
+    torch.testing.assert_close(w, w_ref, atol=1e-6, rtol=1e-5)
+    torch.testing.assert_close(out, out_ref, atol=1e-5, rtol=1e-5)
+    assert bool((w[:2, :, 1:] == 0).all()) and set(g_new) == set(g_ref)
+    for name in g_ref:
+        torch.testing.assert_close(g_new[name], g_ref[name], atol=1e-4, rtol=1e-4, msg=name)
+
+
 @torch.no_grad()
 def test_pointer_net_never_samples_a_masked_candidate_or_a_taken_fire():
     torch.manual_seed(0)
