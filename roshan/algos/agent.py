@@ -23,8 +23,14 @@ class Agent(Protocol):
         IQL executes its noise-free action (as the reference does)."""
         ...
 
-    def act_deterministic(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
-        """The evaluation actions: the policy's mode (PPO), mu(s) (TD3), tanh(mu) (IQL)."""
+    def act_deterministic(self, obs: dict[str, torch.Tensor], cache=None) -> torch.Tensor:
+        """The evaluation actions: the policy's mode (PPO), mu(s) (TD3), tanh(mu) (IQL). ``cache`` is a
+        :meth:`new_cache` object kept by a caller that acts on the same rows step after step; it gives the same
+        actions with less work (PPO's FlyAgent encodes only the newest frame), or is ignored."""
+        ...
+
+    def new_cache(self):
+        """A fresh acting cache for :meth:`act_deterministic` (``clear()``, ``restart(rows)``)."""
         ...
 
     def state_dict(self) -> dict:

@@ -1,6 +1,7 @@
 """Frame reuse for stacked FlyAgent observations: the env pushes one frame per step, so consecutive stacks share
 all but their newest frame. Acting encodes only the newest frame (:class:`FrameCache`), and the ``sequences``
-minibatches encode each distinct frame of a drone's rollout once (:func:`stack_index`, :func:`gather_stacks`)."""
+minibatches encode each distinct frame of a drone's rollout once (:func:`stack_index`, :func:`gather_stacks`).
+A policy without frame stacks keeps a :class:`NoCache`."""
 
 import torch
 
@@ -35,6 +36,16 @@ def gather_stacks(distinct: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
     T, _, F = index.shape
     idx = index.permute(1, 0, 2).reshape(c, T * F, 1).expand(c, T * F, D)
     return distinct.transpose(0, 1).gather(1, idx).view(c, T, F, D).transpose(0, 1)
+
+
+class NoCache:
+    """The acting cache of a policy without frame stacks: nothing to keep between steps."""
+
+    def clear(self) -> None:
+        pass
+
+    def restart(self, rows: torch.Tensor) -> None:
+        pass
 
 
 class FrameCache:

@@ -83,8 +83,16 @@ class FrozenFlyPolicy:
         self.config, agent, self.path = load_agent(path, device=device)
         refuse_planner(self.config, target, self.path, key)
         self.frames = self.config.fly.frames
+        self._agent = agent
         self._act = policy_fn(agent)
 
-    def __call__(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+    def new_cache(self):
+        """An acting cache for one drone group (``__call__``'s ``cache``): the env that owns the group keeps it
+        and marks the rows (envs x drones) whose stacks it restarted."""
+        return self._agent.new_cache()
+
+    def __call__(self, obs: dict[str, torch.Tensor], cache=None) -> torch.Tensor:
+        """Actions (E, N, 2) for stacked frames (E, N, F, ...); with ``cache`` (:meth:`new_cache`, kept for these
+        rows between consecutive env steps) only the newest frame is encoded, which gives the same actions."""
         e, n = obs["agent"].shape[:2]
-        return self._act({k: v.flatten(0, 1) for k, v in obs.items()}).view(e, n, 2)
+        return self._act({k: v.flatten(0, 1) for k, v in obs.items()}, cache).view(e, n, 2)

@@ -13,6 +13,7 @@ import torch
 
 from roshan.algos.buffers import ReplayBatch, ReplayBuffer
 from roshan.algos.distributions import ClippedGaussian, TanhNormal
+from roshan.algos.frames import NoCache
 from roshan.algos.networks import MeanActor, TwinQ, ValueNet, check_meta, frozen_copy, soft_update, to_device
 from roshan.algos.normalize import RewardScaler
 from roshan.algos.optim import make_optimizer, make_scheduler
@@ -78,10 +79,13 @@ class IQL:
         return self.act_deterministic(obs)
 
     @torch.no_grad()
-    def act_deterministic(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+    def act_deterministic(self, obs: dict[str, torch.Tensor], cache: NoCache | None = None) -> torch.Tensor:
         """tanh(mu) (B, 2): the TanhNormal mode, and in Gaussian mode the mean, which is tanh(mu) too
         (docs/model/learning.md §2.3)."""
         return torch.tanh(self.actor(to_device(obs, self.device)))
+
+    def new_cache(self) -> NoCache:
+        return NoCache()
 
     def log_prob(self, obs: dict[str, torch.Tensor], actions: torch.Tensor) -> torch.Tensor:
         """log pi(a|s) (B,) under the fixed-std policy: TanhNormal(mu, e^-3) or ClippedGaussian(tanh(mu), e^-3)."""

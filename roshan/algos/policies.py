@@ -20,7 +20,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from roshan.algos.distributions import ClippedGaussian, TanhNormal
-from roshan.algos.frames import FrameCache, gather_stacks
+from roshan.algos.frames import FrameCache, NoCache, gather_stacks
 from roshan.algos.networks import ActorCritic
 from roshan.algos.planner_nets import PLANNER_NETS, trim_candidates
 from roshan.config import PPOConfig
@@ -44,16 +44,6 @@ class Scored(NamedTuple):
     entropy: torch.Tensor  # (B,)
     value: torch.Tensor  # (B,)
     penalty: torch.Tensor | float  # a loss term of the policy's own, added to PPO's (0.0 when it has none)
-
-
-class NoCache:
-    """The acting cache of a policy without frame stacks: nothing to keep between steps."""
-
-    def clear(self) -> None:
-        pass
-
-    def restart(self, rows: torch.Tensor) -> None:
-        pass
 
 
 SATURATED = 2.185  # atanh(0.975): a pre-tanh mean beyond it gives the action +-1 after the 41-level rounding

@@ -171,10 +171,10 @@ class PPO:
         return self.policy.sample(obs, generator).action
 
     @torch.no_grad()
-    def act_deterministic(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+    def act_deterministic(self, obs: dict[str, torch.Tensor], cache=None) -> torch.Tensor:
         """The policy's deterministic actions (the distribution's mode; planner: per-drone argmax), with the
-        averaged weights where ``ppo.ema_decay`` > 0."""
-        return (self.policy if self.average is None else self.average.policy).act_deterministic(obs)
+        averaged weights where ``ppo.ema_decay`` > 0; ``cache``: :meth:`new_cache`'s, for those weights only."""
+        return (self.policy if self.average is None else self.average.policy).act_deterministic(obs, cache)
 
     @torch.no_grad()
     def sample(self, obs: dict[str, torch.Tensor], generator: torch.Generator | None = None,

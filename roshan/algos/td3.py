@@ -11,6 +11,7 @@ from collections import defaultdict
 import torch
 
 from roshan.algos.buffers import ReplayBatch, ReplayBuffer
+from roshan.algos.frames import NoCache
 from roshan.algos.networks import DeterministicActor, TwinQ, check_meta, frozen_copy, soft_update, to_device
 from roshan.algos.optim import make_optimizer, make_scheduler
 from roshan.config import TD3Config
@@ -79,9 +80,12 @@ class TD3:
         return (actions + noise).clamp(-1.0, 1.0)
 
     @torch.no_grad()
-    def act_deterministic(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+    def act_deterministic(self, obs: dict[str, torch.Tensor], cache: NoCache | None = None) -> torch.Tensor:
         """mu(s) (B, 2) in [-1, 1]."""
         return self.actor(to_device(obs, self.device))
+
+    def new_cache(self) -> NoCache:
+        return NoCache()
 
     @torch.no_grad()
     def compute_target(self, batch: ReplayBatch, generator: torch.Generator | None = None) -> torch.Tensor:

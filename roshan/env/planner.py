@@ -80,6 +80,9 @@ class PlannerVectorEnv(VectorEnvCore):
         self._explore_obs = fly_obs_views(self._explore_buf, m)
         self._explore_actions = torch.zeros((num_envs, m, 2), device=dev)
         self._fly_actions = torch.zeros((num_envs, n, 2), device=dev)
+        # the frozen policies' frame caches: each low-level step pushes one frame, so only the newest is encoded
+        self._fly_cache = self.fly_policy.new_cache()
+        self._explore_cache = self.explorer_policy.new_cache() if self.explorer_policy else None
         self._prepare_launches()
 
     def level_name(self) -> str:
@@ -143,11 +146,33 @@ class PlannerVectorEnv(VectorEnvCore):
         if self.controller == "planner":
             self.kernels.apply(self._check_actions(actions))
         for _ in range(self.interval):
-            self._fly_actions.copy_(self.fly_policy(self._fly_obs))
+            self._fly_actions.copy_(self.fly_policy(self._fly_obs, self._fly_cache))
             if self.explorer_policy is not None:
-                self._explore_actions.copy_(self.explorer_policy(self._explore_obs))
+                self._explore_actions.copy_(self.explorer_policy(self._explore_obs, self._explore_cache))
             self._launch_low_step()
         self._launch_finish()
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Every env restarts, and with it every frame stack."""
+        out = super().reset(seed=seed, options=options)
+        for cache in (self._fly_cache, self._explore_cache):
+            if cache is not None:
+                cache.clear()
+        return out
+
+    def step(self, actions):
+        """One planner decision; the envs that ended restarted their drones' frame stacks (an env that ended
+        between low-level steps froze its stacks for the rest of the decision, so its cached frames are stale
+        too: both are re-encoded from the fresh stacks)."""
+        out = super().step(actions)
+        if self._dones_host is not None and not self._dones_host.any():
+            return out  # nothing restarted (the host read as in the base's step)
+        ended = self.terminations | self.truncations
+        for cache, group in ((self._fly_cache, self.num_drones),
+                             (self._explore_cache, self.planner_config.num_explorers)):
+            if cache is not None:
+                cache.restart(ended.repeat_interleave(group))
+        return out
 
     def _check_actions(self, actions) -> torch.Tensor:
         actions = self._actions_tensor(actions, (self.num_envs, self.num_drones), "envs, drones")

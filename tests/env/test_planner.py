@@ -240,3 +240,32 @@ def test_the_planner_env_takes_its_section_from_the_config_unless_given_one():
     env = PlannerVectorEnv(1, cfg, controller="greedy")
     assert env.planner_config is pc and env.physics_steps_per_step == 3
     env.close()
+
+
+@pytest.mark.slow
+def test_frozen_fliers_encode_only_the_newest_frame_and_fly_as_with_whole_stacks():
+    """The env's frame caches (the frozen collision FlyAgent's 3-frame stacks, the explorers' too) give the drones
+    bit for bit the actions of encoding every stack at every low-level step, through episode ends and restarts."""
+    collision = str(Path(MODEL).parent / "fly_collision")
+    cfg = Config(ignition=IgnitionConfig(fire_percentage=0.02), drones=DroneConfig(num_drones=3))
+    pc = PlannerConfig(fly_model=collision, explorer_model=MODEL, num_explorers=2)
+    env = PlannerVectorEnv(2, cfg, pc, evaluation=True, controller="greedy", seed=5)
+    actions = torch.zeros((2, 3), dtype=torch.long)
+
+    def play(decisions: int) -> tuple[list, torch.Tensor]:
+        env.reset(seed=5)
+        stacks, ended = [], torch.zeros(2, dtype=torch.long)
+        for _ in range(decisions):
+            _, _, terminated, truncated, _ = env.step(actions)
+            stacks.append((env._fly_buf.clone(), env._explore_buf.clone()))
+            ended += terminated | truncated
+        return stacks, ended
+
+    cached, ended = play(150)
+    assert env._fly_cache.za is not None and env._fly_cache.za.shape[1] == 3  # the cache was used
+    assert bool((ended >= 1).all()), f"episodes ended per env: {ended.tolist()}: the restarts were not exercised"
+    env._fly_cache = env._explore_cache = None  # every stack encoded whole, as before the caches
+    whole, _ = play(150)
+    for step, (a, b) in enumerate(zip(cached, whole, strict=True)):
+        assert torch.equal(a[0], b[0]) and torch.equal(a[1], b[1]), f"decision {step}"
+    env.close()
