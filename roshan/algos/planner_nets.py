@@ -3,8 +3,9 @@
 PPO that trains them is :class:`roshan.algos.ppo.PPO` with :class:`roshan.algos.policies.PlannerPolicy`.
 
 A planner observation is a dict of float tensors with the batch first: ``drones`` (B, N, 2), ``goals`` (B, N, 2),
-``water`` (B, N, 1), ``fires`` (B, K, 2) (index 0 = the groundstation, then fire cells, zero padding after the
-valid prefix), ``fires_mask`` (B, K) (1 = valid) and ``globals`` (B, 5) (fire count, centroid (2), wind (2)).
+``water`` (B, N, 1), with a battery ``energy`` (B, N, 2) (the charge and the charge the flight home needs),
+``fires`` (B, K, 2) (index 0 = the groundstation, then fire cells, zero padding after the valid prefix),
+``fires_mask`` (B, K) (1 = valid) and ``globals`` (B, 5) (fire count, centroid (2), wind (2)).
 An action is (B, N) long: one candidate index per drone.
 """
 
@@ -92,10 +93,14 @@ class ThesisPlannerNet(nn.Module):
     Here acting and updating use the same mask: padding is masked, and index 0 (groundstation) is masked whenever
     at least one fire is valid, so it is chosen only when no fire is listed (which is what acting does in the
     reference).
+
+    With ``resources`` (drones with a battery, issue 33) the drone queries also embed the tank's fill and the
+    ``energy`` pair, and the groundstation is always a candidate: sending a drone home to swap its battery or
+    refill is a decision of its own.
     """
 
     def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS,
-                 temperature: float = 1.0):
+                 temperature: float = 1.0, resources: bool = False):
         super().__init__()
         self.pos_emb = nn.Linear(2, hidden)
         self.goal_emb = nn.Linear(2, hidden)
@@ -103,17 +108,27 @@ class ThesisPlannerNet(nn.Module):
         self.id_emb = nn.Embedding(num_drones, hidden)
         self.attn = nn.MultiheadAttention(hidden, heads, batch_first=True)
         self.value_head = nn.Linear(hidden, 1)
+        self.resources = resources
+        if resources:  # without a battery the network (and its initial draws) is the thesis net's
+            self.water_emb, self.energy_emb = nn.Linear(1, hidden), nn.Linear(2, hidden)
         init_weights(self)
         layer_init(self.value_head, gain=1.0)
         self.register_buffer("drone_ids", torch.arange(num_drones), persistent=False)
         self.temperature = temperature  # planner.temperature: logits / T, so p ~ weights^(1/T)
 
-    @staticmethod
-    def allowed(fires_mask: torch.Tensor) -> torch.Tensor:
-        """(B, K) bool: valid fires, or only the groundstation when no fire is valid."""
+    def allowed(self, fires_mask: torch.Tensor) -> torch.Tensor:
+        """(B, K) bool: valid fires, or only the groundstation when no fire is valid (with resources: the
+        groundstation always)."""
         allowed = fires_mask > 0
-        allowed[:, 0] = ~allowed[:, 1:].any(-1)
+        allowed[:, 0] = True if self.resources else ~allowed[:, 1:].any(-1)
         return allowed
+
+    def queries(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        """(B, N, H) drone queries: position, goal and id (with resources: water and energy too)."""
+        query = self.pos_emb(obs["drones"]) + self.goal_emb(obs["goals"]) + self.id_emb(self.drone_ids)
+        if self.resources:
+            query = query + self.water_emb(obs["water"]) + self.energy_emb(obs["energy"])
+        return query
 
     def attend(self, obs: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Attention weights averaged over heads (B, N, K), attention output (B, N, H) and the mask (B, K).
@@ -127,7 +142,7 @@ class ThesisPlannerNet(nn.Module):
         it to float rounding (tests/algos/test_planner_algo.py).
         """
         allowed = self.allowed(obs["fires_mask"])
-        query = self.pos_emb(obs["drones"]) + self.goal_emb(obs["goals"]) + self.id_emb(self.drone_ids)
+        query = self.queries(obs)
         B, N, H = query.shape
         heads = self.attn.num_heads
         size = H // heads
@@ -190,7 +205,7 @@ class PlannerEncoder(nn.Module):
     among drones, then cross-attention to the fire candidates, each with a residual and LayerNorm
     (docs/model/learning.md §3.2)."""
 
-    def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS):
+    def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS, resources: bool = False):
         super().__init__()
         self.pos_emb, self.goal_emb, self.vel_emb = embed(2), embed(2), embed(2)
         self.water_emb, self.fire_emb = embed(1), embed(2)
@@ -203,6 +218,9 @@ class PlannerEncoder(nn.Module):
         self.cross_attn = nn.MultiheadAttention(hidden, heads, batch_first=True)
         self.cross_norm = nn.LayerNorm(hidden)
         self.register_buffer("drone_ids", torch.arange(num_drones), persistent=False)
+        # with a battery, each drone's energy pair is added to its fused token (without one the encoder is the
+        # one before)
+        self.energy_emb = embed(2) if resources else None
 
     def forward(self, obs: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Drone representations (B, N, H), fire embeddings (B, K, H) and candidate validity (B, K)."""
@@ -214,6 +232,8 @@ class PlannerEncoder(nn.Module):
                             self.vel_emb(torch.zeros_like(pos)), self.water_emb(obs["water"])], dim=-1)
         context = self.count_emb(g[:, 0:1]) + self.centroid_emb(g[:, 1:3]) + self.wind_emb(g[:, 3:5])
         d = self.fusion(tokens) + context.unsqueeze(1)
+        if self.energy_emb is not None:
+            d = d + self.energy_emb(obs["energy"])
         d = self.self_norm(d + self.self_attn(d, d, d, need_weights=False)[0])
         fires = self.fire_emb(obs["fires"])
         cross = self.cross_attn(d, fires, fires, key_padding_mask=~valid, need_weights=False)[0]
@@ -226,9 +246,9 @@ class PointerPlannerNet(nn.Module):
     repeats) and an attention-pooled critic on the shared encoder."""
 
     def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS,
-                 temperature: float = 1.0):
+                 temperature: float = 1.0, resources: bool = False):
         super().__init__()
-        self.encoder = PlannerEncoder(num_drones, hidden, heads)
+        self.encoder = PlannerEncoder(num_drones, hidden, heads, resources)
         self.query_proj = nn.Linear(hidden, hidden)
         self.key_proj = nn.Linear(hidden, hidden)
         self.log_temperature = nn.Parameter(torch.zeros(1))

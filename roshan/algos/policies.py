@@ -169,15 +169,16 @@ class PlannerPolicy:
     # both planner critics read the actor's encoder (thesis Table 5.8, docs/model/learning.md §3.2)
     shares_encoder = True
 
-    def __init__(self, network: str, num_drones: int, temperature: float = 1.0):
-        self.net = PLANNER_NETS[network](num_drones, temperature=temperature)
-        self.novelty_dim = 5 * num_drones + 5
+    def __init__(self, network: str, num_drones: int, temperature: float = 1.0, resources: bool = False):
+        self.net = PLANNER_NETS[network](num_drones, temperature=temperature, resources=resources)
+        self.novelty_dim = (7 if resources else 5) * num_drones + 5
 
     @staticmethod
     def novelty_features(obs: dict[str, torch.Tensor]) -> torch.Tensor:
-        """Drone positions, goals and water with the global fire context (B, 5 N + 5): the candidate list has
-        no fixed length, so it enters only through the globals (count, centroid, wind)."""
-        return torch.cat([obs["drones"].flatten(1), obs["goals"].flatten(1), obs["water"].flatten(1),
+        """Drone positions, goals, water (and energy) with the global fire context (B, 5 N + 5, or 7 N + 5): the
+        candidate list has no fixed length, so it enters only through the globals (count, centroid, wind)."""
+        energy = [obs["energy"].flatten(1)] if "energy" in obs else []
+        return torch.cat([obs["drones"].flatten(1), obs["goals"].flatten(1), obs["water"].flatten(1), *energy,
                           obs["globals"]], dim=-1)
 
     def critic_parameters(self) -> list[nn.Parameter]:

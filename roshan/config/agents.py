@@ -61,6 +61,8 @@ PLANNER_PRESETS: dict[str, dict[str, float]] = {
                      "fast": 0.21654104693212245},
 }
 PLANNER_NEWEST_TERMS = {"distance": 0.1, "spread": 0.05, "refill": 0.5, "empty": -0.05}
+# paid only with a battery (drones.energy): per drone that came down in the decision, about the TimeOut penalty
+PLANNER_RESOURCE_TERMS = {"lost": -2.0}
 
 
 @dataclass(frozen=True)
@@ -85,6 +87,7 @@ class PlannerRewardConfig(Section):
     spread: float | None = None  # SpreadPrevention (newest)
     refill: float | None = None  # WaterRefill (newest, water limit)
     empty: float | None = None  # EmptyTank (newest, water limit)
+    lost: float | None = None  # DroneLost, per drone whose battery ran empty (drones.energy; default -2.0)
 
 
 CONTROLLERS = ("planner", "greedy")  # who picks the planner drones' goals

@@ -29,7 +29,8 @@ class Level:
 
 FLY_AGENT = Level("FlyAgent", flies=True, shape_keys=("fly.collision", "fly.frames"),
                   section_shape_keys=("share_encoder",), frozen_models=())
-PLANNER = Level("planner", flies=False, shape_keys=("planner.network", "drones.num_drones"), section_shape_keys=(),
+PLANNER = Level("planner", flies=False, shape_keys=("planner.network", "drones.num_drones", "drones.energy.preset"),
+                section_shape_keys=(),
                 frozen_models=("planner.fly_model", "planner.explorer_model"))
 
 ALGO_LEVELS = {"ppo": FLY_AGENT, "td3": FLY_AGENT, "iql": FLY_AGENT, "planner": PLANNER}

@@ -71,7 +71,7 @@ class PlannerVectorEnv(VectorEnvCore):
         n, m = self.num_drones, pc.num_explorers
         self.interval = pc.interval
         self._define_spaces(n)
-        self.layout = obs_layout(n, self.max_candidates)
+        self.layout = obs_layout(n, self.max_candidates, energy=self.has_energy)
         self._allocate_buffers((max(end for _, end in self.layout.values()),), ())
         dev = self.device
         self._fly_buf = torch.zeros((num_envs, n, self.fly_policy.frames, observe.frame_width(n)), device=dev)
@@ -84,6 +84,11 @@ class PlannerVectorEnv(VectorEnvCore):
         self._fly_cache = self.fly_policy.new_cache()
         self._explore_cache = self.explorer_policy.new_cache() if self.explorer_policy else None
         self._prepare_launches()
+
+    @property
+    def has_energy(self) -> bool:
+        """Drones with a battery (``drones.energy``): the observation has an ``energy`` part."""
+        return self.config.drones.energy.enabled
 
     def level_name(self) -> str:
         return f"PlannerVectorEnv ({self.controller})"
@@ -105,7 +110,7 @@ class PlannerVectorEnv(VectorEnvCore):
         n, pc = self.num_drones, self.planner_config
         m, k = pc.num_explorers, pc.max_candidates or self.land.rows * self.land.cols + 1
         ex_frames = self.explorer_policy.frames if self.explorer_policy else 1
-        width = max(end for _, end in obs_layout(n, k).values())
+        width = max(end for _, end in obs_layout(n, k, energy=self.has_energy).values())
         stacks = n * self.fly_policy.frames * observe.frame_width(n) + m * ex_frames * observe.frame_width(m)
         return self._core_buffer_bytes(width, 1) + self.num_envs * 4 * (stacks + 2 * m + 2 * n)  # + actions
 
@@ -115,6 +120,8 @@ class PlannerVectorEnv(VectorEnvCore):
             "drones": box(-np.inf, np.inf, (n, 2), np.float32),  # outside [-1, 1] when a drone leaves the map
             "goals": box(-1.0, 1.0, (n, 2), np.float32),
             "water": box(0.0, 1.0, (n, 1), np.float32),
+            # with a battery: the charge and what the quickest flight home needs, as fractions of a full one
+            **({"energy": box(0.0, 1.0, (n, 2), np.float32)} if self.has_energy else {}),
             "fires": box(-1.0, 1.0, (k, 2), np.float32),
             "fires_mask": box(0.0, 1.0, (k,), np.float32),
             "globals": box(-2.0, 1.0, (5,), np.float32),
@@ -124,8 +131,8 @@ class PlannerVectorEnv(VectorEnvCore):
 
     def _views(self, buf: torch.Tensor) -> dict[str, torch.Tensor]:
         n, k = self.num_drones, self.max_candidates
-        shapes = {"drones": (n, 2), "goals": (n, 2), "water": (n, 1), "fires": (k, 2), "fires_mask": (k,),
-                  "globals": (5,)}
+        shapes = {"drones": (n, 2), "goals": (n, 2), "water": (n, 1), "energy": (n, 2), "fires": (k, 2),
+                  "fires_mask": (k,), "globals": (5,)}
         return {name: buf[:, a:b].unflatten(1, shapes[name]) for name, (a, b) in self.layout.items()}
 
     def _kernel_obs(self):

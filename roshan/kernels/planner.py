@@ -51,10 +51,12 @@ def planner_time_limit(rows: int, cols: int, cell: float, dt: float, v_max: floa
     return max(math.ceil((length / v_max + fires * dt) / dt), math.ceil(2 * t_phys))
 
 
-def obs_layout(num_drones: int, max_candidates: int) -> dict[str, tuple[int, int]]:
-    """(start, end) column of every observation part in the flat row."""
+def obs_layout(num_drones: int, max_candidates: int, energy: bool = False) -> dict[str, tuple[int, int]]:
+    """(start, end) column of every observation part in the flat row; with a battery (``energy``) each drone's
+    charge and the charge its quickest flight home needs, both as fractions of a full battery, follow the water."""
     n, k = num_drones, max_candidates
-    parts = {"drones": 2 * n, "goals": 2 * n, "water": n, "fires": 2 * k, "fires_mask": k, "globals": 5}
+    parts = {"drones": 2 * n, "goals": 2 * n, "water": n, **({"energy": 2 * n} if energy else {}),
+             "fires": 2 * k, "fires_mask": k, "globals": 5}
     out, start = {}, 0
     for name, width in parts.items():
         out[name] = (start, start + width)
@@ -94,10 +96,11 @@ class PlannerKernels(EpisodeKernels):
         self.burnout = burnout
         self.K = max_candidates
         self.fly_frames, self.explore_frames = fly_frames, explore_frames
-        self.use_water = drones.use_water
-        self.layout = obs_layout(drones.num_drones, max_candidates)
+        self.use_water, self.use_energy = drones.use_water, drones.use_energy
+        self.layout = obs_layout(drones.num_drones, max_candidates, energy=self.use_energy)
         self.o_drones, self.o_goals, self.o_water, self.o_fires, self.o_mask, self.o_globals = (
             self.layout[k][0] for k in ("drones", "goals", "water", "fires", "fires_mask", "globals"))
+        self.o_energy = self.layout["energy"][0] if self.use_energy else 0
         self.norm = 2.0 / max(fire.rows, fire.cols)  # norm(q) = q * norm - 1
         self.log_cells = math.log(1.0 + fire.num_cells)
         # The low level runs the FlyAgent goal rules: planner drones drop water on every burning cell they fly
@@ -118,13 +121,14 @@ class PlannerKernels(EpisodeKernels):
         self.prev_burning = ti.field(ti.i32, E)
         self.decisions = ti.field(ti.i32, E)  # planner steps in this episode
         self.prev_water = ti.field(ti.f32, (E, N))
+        self.prev_lost = ti.field(ti.i32, E)  # drones down at the previous decision (DroneLost pays the new ones)
         self.cand_cell = ti.field(ti.i32, (E, max_candidates))  # flat cell of candidate k (k >= 1)
         self.cand_count = ti.field(ti.i32, E)  # valid candidates, groundstation included
 
     @staticmethod
     def field_bytes(num_envs: int, num_drones: int, max_candidates: int) -> int:
         """Bytes of the fields PlannerKernels allocates (the episode fields included), known before it is built."""
-        per_env = 8 * 4 + 4 * num_drones + 4 * max_candidates  # scalars, prev_water, cand_cell
+        per_env = 9 * 4 + 4 * num_drones + 4 * max_candidates  # scalars, prev_water, cand_cell
         return EpisodeKernels.field_bytes(num_envs) + num_envs * per_env
 
     # ------------------------------------------------------------------------------------------ kernels
@@ -204,6 +208,7 @@ class PlannerKernels(EpisodeKernels):
         self.start_counters(e)
         self.decisions[e] = 0
         self.finished[e] = 0
+        self.prev_lost[e] = 0
         self.prev_burning[e] = self.fire.burning_count(e)
         self.mean_dist[e] = self.mean_goal_distance(e)
         self.build_obs(obs, e)
@@ -258,6 +263,12 @@ class PlannerKernels(EpisodeKernels):
             self.prev_water[e, d] = dr.water[e, d]
         r += self.step_terms[e] + planner_step_reward(self.coef, 0.0, 0, self.ext_count[e], 0.0, drop, refilled,
                                                       empty)
+        if ti.static(self.use_energy):
+            lost = 0
+            for d in range(dr.num_drones):
+                lost += dr.lost[e, d]
+            r += self.coef.lost * (lost - self.prev_lost[e])  # DroneLost, for the drones down in this decision
+            self.prev_lost[e] = lost
         rewards[e] = r
         self.ret[e] += r
         if end[0] != 0:
@@ -364,6 +375,10 @@ class PlannerKernels(EpisodeKernels):
             if ti.static(self.use_water):
                 w = ti.math.clamp(dr.water[e, d] / dr.capacity, 0.0, 1.0)
             obs[e, self.o_water + d] = w
+            if ti.static(self.use_energy):
+                obs[e, self.o_energy + 2 * d] = ti.math.clamp(dr.energy[e, d] / dr.battery, 0.0, 1.0)
+                home = dr.energy_to_groundstation(e, d) / dr.battery
+                obs[e, self.o_energy + 2 * d + 1] = ti.math.clamp(home, 0.0, 1.0)
         f0 = self.o_fires
         m0 = self.o_mask
         gs = dr.groundstation_centre(e)

@@ -11,7 +11,14 @@ from dataclasses import dataclass, fields
 
 import taichi as ti
 
-from roshan.config.agents import PLANNER_NEWEST_TERMS, PLANNER_PRESETS, PRESETS, PlannerRewardConfig, RewardConfig
+from roshan.config.agents import (
+    PLANNER_NEWEST_TERMS,
+    PLANNER_PRESETS,
+    PLANNER_RESOURCE_TERMS,
+    PRESETS,
+    PlannerRewardConfig,
+    RewardConfig,
+)
 
 PROXIMITY_THRESHOLD = 0.1  # normalised neighbour offset below which the proximity term counts
 
@@ -96,11 +103,12 @@ class PlannerCoefficients:
     spread: float
     refill: float
     empty: float
+    lost: float
     newest: bool
 
     @classmethod
     def resolve(cls, cfg: PlannerRewardConfig) -> "PlannerCoefficients":
-        values = {**PLANNER_PRESETS[cfg.preset], **PLANNER_NEWEST_TERMS}
+        values = {**PLANNER_PRESETS[cfg.preset], **PLANNER_NEWEST_TERMS, **PLANNER_RESOURCE_TERMS}
         for f in fields(PlannerRewardConfig):
             v = getattr(cfg, f.name)
             if f.name not in ("preset", "version") and v is not None:

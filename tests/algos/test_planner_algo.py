@@ -284,3 +284,21 @@ def test_planner_rnd_reads_drones_goals_water_and_globals():
     torch.testing.assert_close(features[:, -5:], obs["globals"])
     metrics = agent.update(bandit_rollout(agent, obs, 4, g), g)
     assert metrics["rnd_intrinsic"] > 0 and metrics["rnd_loss"] > 0
+
+
+@torch.no_grad()
+@pytest.mark.parametrize("net_cls", NETS)
+def test_with_a_battery_the_nets_read_energy_and_may_send_a_drone_home_while_fires_burn(net_cls):
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(5)
+    obs = random_obs(6, 3, 9, g, n_valid=torch.full((6,), 9))  # fires listed in every row
+    obs["energy"] = torch.rand(6, 3, 2, generator=g)
+    plain, aware = net_cls(3), net_cls(3, resources=True)
+    assert not any("energy" in k for k in plain.state_dict())  # without a battery: the nets as before
+    actions = torch.zeros((6, 3), dtype=torch.long)  # everyone home
+    assert bool(torch.isfinite(aware.evaluate(obs, actions)[0]).all())  # the groundstation is a candidate
+    if net_cls is ThesisPlannerNet:
+        assert bool((plain.probs(obs)[..., 0] == 0).all()) and bool((aware.probs(obs)[..., 0] > 0).all())
+    drained = {**obs, "energy": torch.zeros_like(obs["energy"])}
+    assert not torch.allclose(aware.evaluate(obs, actions)[0], aware.evaluate(drained, actions)[0])
+    assert not torch.allclose(aware.value(obs), aware.value(drained))

@@ -2,7 +2,7 @@
 
 import pytest
 
-from roshan.checkpoints import model_keys, optimiser_keys
+from roshan.checkpoints import config_differences, model_keys, optimiser_keys
 from roshan.config import FLY_AGENT, PLANNER, Config, ConfigError, level_of, load_config
 from roshan.runs.collect import DroneRows, EnvRows, level_rows
 
@@ -26,8 +26,12 @@ def test_model_keys_follow_the_level_and_the_algos_section():
     assert model_keys(load_config(None, ["train.algo=td3"])) == ("train.algo", "fly.collision", "fly.frames",
                                                                    "td3.share_encoder")
     assert model_keys(Config()) == ("train.algo", "fly.collision", "fly.frames", "ppo.share_encoder")
-    assert model_keys(load_config(None, ["train.algo=planner"])) == ("train.algo", "planner.network",
-                                                                       "drones.num_drones")
+    planner = load_config(None, ["train.algo=planner"])
+    assert model_keys(planner) == ("train.algo", "planner.network", "drones.num_drones", "drones.energy.preset")
+    # a planner trained without a battery cannot serve one: its observation has no energy part
+    battery = load_config(None, ["train.algo=planner", "drones.energy.preset=scenario"])
+    assert config_differences(battery, planner, model_keys(planner)) == [
+        "drones.energy.preset = 'scenario' here but 'off' in the checkpoint"]
 
 
 def test_the_planner_is_trained_by_the_one_ppo():

@@ -6,7 +6,15 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from roshan.config import Config, DroneConfig, EnergyConfig, IgnitionConfig, PlannerConfig, WindConfig
+from roshan.config import (
+    Config,
+    DroneConfig,
+    EnergyConfig,
+    IgnitionConfig,
+    PlannerConfig,
+    PlannerRewardConfig,
+    WindConfig,
+)
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.planner import PlannerVectorEnv
 from roshan.episode import LOST, REASONS
@@ -86,4 +94,69 @@ def test_the_resource_aware_greedy_swaps_batteries_and_loses_no_drone():
     assert out["drones_lost"].tolist() == [0, 0, 0, 0]  # a base is always reachable on this map: none may be lost
     assert out["success"].tolist() == [1, 1, 1, 1]
     assert out["battery_swaps"].sum() >= 3  # the long episodes needed returns (every drone swaps at once here)
+    env.close()
+
+
+def planner_env(energy: EnergyConfig, **rewards) -> PlannerVectorEnv:
+    """A planner-controlled env in training mode (explorers parked), 3 drones, a decision every low-level step;
+    ``rewards`` replace the whole reward (every other term 0)."""
+    zero = {k: 0.0 for k in ("goal", "burned", "ground", "timeout", "same", "extinguish", "fast", "lost")}
+    cfg = Config(ignition=FIRES, drones=DroneConfig(num_drones=3, energy=energy), wind=WindConfig(speed=0.0))
+    pc = PlannerConfig(interval=1, fly_model=MODEL, explorer_model=MODEL, num_explorers=2,
+                       rewards=PlannerRewardConfig(**{**zero, **rewards}))
+    return PlannerVectorEnv(2, cfg, pc, controller="planner", seed=4)
+
+
+def home_fraction(env: PlannerVectorEnv, battery: float) -> np.ndarray:
+    """(E, N) energy of each drone's quickest flight home over a full battery, computed here from the positions
+    (kernels/drones.py energy_to_groundstation, with the scenario's powers and a full tank)."""
+    dr, values = env.drones, env.config.drones.energy.values()
+    centre = (dr.groundstation.to_numpy()[:, None, :] + 0.5) * dr.cell
+    gap = np.abs(centre - dr.pos.to_numpy())
+    long_axis, short_axis = gap.max(-1), gap.min(-1)
+    v = env.config.drones.max_speed
+    speed_sq = v * v * (1.0 + (short_axis / np.maximum(long_axis, 1e-6)) ** 2)
+    power = values["hover_power"] + values["speed_power"] * speed_sq + values["payload_power"]
+    return np.clip(power * long_axis / v / battery, 0.0, 1.0)
+
+
+def test_the_planner_observes_each_drones_charge_and_the_charge_its_flight_home_needs():
+    env = planner_env(EnergyConfig(preset="scenario"))
+    assert env.single_observation_space["energy"].shape == (3, 2)
+    obs, _ = env.reset(seed=4)
+    assert obs["energy"].shape == (2, 3, 2) and bool((obs["energy"][..., 0] == 1.0).all())  # full at the start
+    for _ in range(12):  # every drone flies to the first listed fire
+        obs, *_ = env.step(torch.ones((2, 3), dtype=torch.long))
+    battery = env.config.drones.energy.values()["capacity"]
+    charge = env.drones.energy.to_numpy() / battery
+    assert float(charge.max()) < 1.0  # they flew: the batteries drained
+    np.testing.assert_allclose(obs["energy"][..., 0].numpy(), charge, rtol=1e-6)
+    home = home_fraction(env, battery)
+    assert float(home.max()) > 0.0
+    np.testing.assert_allclose(obs["energy"][..., 1].numpy(), home, rtol=1e-4, atol=1e-6)
+    env.close()
+
+
+def test_without_a_battery_the_planner_observation_has_no_energy_part():
+    env = planner_env(EnergyConfig())
+    assert "energy" not in env.single_observation_space.spaces
+    obs, _ = env.reset(seed=4)
+    assert "energy" not in obs
+    env.close()
+
+
+def test_drone_lost_pays_its_penalty_once_for_each_drone_that_came_down():
+    env = planner_env(TINY, lost=-2.0)
+    env.reset(seed=4)
+    total, lost, running = torch.zeros(2), torch.zeros(2), torch.ones(2, dtype=torch.bool)
+    for _ in range(30):  # 30 J: each drone is down within 3 steps of leaving the groundstation
+        _, rewards, terms, truncs, info = env.step(torch.ones((2, 3), dtype=torch.long))
+        total += rewards * running  # the first episode of each env
+        ended = (terms | truncs) & running
+        lost[ended] = info["episode_energy"]["drones_lost"][ended]
+        running &= ~ended
+        if not bool(running.any()):
+            break
+    assert not bool(running.any()) and lost.tolist() == [3.0, 3.0]
+    torch.testing.assert_close(total, torch.full((2,), -6.0))  # the only term: 3 drones x -2, each once
     env.close()

@@ -17,7 +17,7 @@ from roshan.runs.report.stats import wilson_interval
 
 _TTE_LABEL = "time to end (steps)"
 _COLORS = {"success": "tab:green", "collision": "tab:red", "boundary": "tab:orange", "timeout": "tab:gray",
-           "burnout": "tab:brown", "unspecified": "tab:purple"}
+           "burnout": "tab:brown", "lost": "tab:blue", "unspecified": "tab:purple"}
 
 
 def _new_figure(width: float = 6.4, height: float = 4.0):

@@ -184,15 +184,21 @@ def summarize(episodes: Mapping[str, Sequence], confidence: float = 0.95, reason
     return summary
 
 
+# with a battery (issue 33): per-episode drones lost, battery swaps, joules drawn and seconds at the groundstation
+BATTERY_TAGS = {"drones_lost": "Drones_Lost", "battery_swaps": "Battery_Swaps", "energy_used": "Energy_Used",
+                "base_time": "Base_Time"}
+
+
 def evaluation_scalars(summary: dict) -> dict[str, float]:
     """The ``Evaluation/*`` TensorBoard scalars of docs/model/learning.md §11 from a :func:`summarize` result, plus the
-    rate of each failure reason (``Evaluation/<Reason>_rate``)."""
+    rate of each failure reason (``Evaluation/<Reason>_rate``) and, with a battery, the battery figures."""
     scalars = {"Evaluation/Success_rate": summary["success_rate"],
                "Evaluation/Success_ci_low": summary["success_ci"][0],
                "Evaluation/Success_ci_high": summary["success_ci"][1], "Evaluation/Success_n": summary["episodes"]}
     for reason, rate in summary["failure_rates"].items():
         scalars[f"Evaluation/{reason.capitalize()}_rate"] = rate
-    for key, name in (("reward", "Reward"), ("tte", "Time"), ("burned", "Percent_Burned"), ("lit", "Ever_Lit")):
+    for key, name in (("reward", "Reward"), ("tte", "Time"), ("burned", "Percent_Burned"), ("lit", "Ever_Lit"),
+                      *((key, BATTERY_TAGS[key]) for key in ENERGY_COLUMNS)):
         if key in summary:
             s = summary[key]
             scalars.update({f"Evaluation/{name}_mean": s["mean"], f"Evaluation/{name}_std": s["std"],

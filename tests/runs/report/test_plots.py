@@ -84,3 +84,12 @@ def test_histogram_counts_whole_episodes(tmp_path, figures):
     ax = figures["time_to_end_hist.png"].axes[0]
     ticks = ax.get_yticks()
     assert len(ticks) >= 2 and all(float(t).is_integer() for t in ticks)
+
+
+def test_every_outcome_of_a_battery_run_has_its_bar_and_colour(tmp_path, figures):
+    """Episodes that ended with every drone down (issue 33) get a "Drones lost" bar of their own."""
+    ep = {"reward": [1.0, -1.0, -2.0], "time": [10, 20, 30], "success": [1, 0, 0], "reason": ["none", "lost", "lost"]}
+    plots.plot_episodes(ep, tmp_path, reasons=("timeout", "burnout", "lost"))
+    ax = figures["failure_reasons_bar.png"].axes[0]
+    counts = {t.get_text(): int(b.get_height()) for t, b in zip(ax.get_xticklabels(), ax.patches, strict=True)}
+    assert counts["Drones lost"] == 2 and counts["Success"] == 1

@@ -130,6 +130,17 @@ def test_evaluation_scalars_use_the_tensorboard_tags():
     assert len(scalars) == 4 + 3 + 3 * 5  # success, the three failure rates, reward / time / burned statistics
 
 
+
+def test_with_a_battery_the_evaluation_scalars_carry_its_figures():
+    eps = ten_episodes(burned=[0.5] * 10)
+    eps.update(drones_lost=[0, 1, 0, 0, 2, 0, 0, 0, 0, 1], battery_swaps=[3] * 10, energy_used=[9000.0] * 10,
+               base_time=[12.5] * 10)
+    scalars = report.evaluation_scalars(report.summarize(eps))
+    assert scalars["Evaluation/Drones_Lost_mean"] == pytest.approx(0.4)
+    assert scalars["Evaluation/Battery_Swaps_median"] == 3.0 and scalars["Evaluation/Energy_Used_mean"] == 9000.0
+    assert scalars["Evaluation/Base_Time_mean"] == pytest.approx(12.5)
+    assert len(scalars) == 4 + 3 + 7 * 5  # and the battery's four statistics
+
 # ---------------------------------------------------------------------------------------------- tables
 
 def table_rows(table: str) -> dict[str, str]:
