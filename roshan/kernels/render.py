@@ -348,6 +348,9 @@ DRONE_PALETTE = ((255, 0, 255), (0, 191, 255), (0, 0, 160), (148, 0, 211), (0, 1
 DRONE_RIM = (0, 0, 0)  # one-pixel dark rim so discs, crosses and explorers stand out on any land colour
 GROUNDSTATION_COLOUR = (255, 255, 255)
 EXPLORER_COLOUR = (255, 255, 255)  # explorers: white diamonds with a dark rim (planner drones are discs)
+# With a battery and / or the water limit, bars under each drone's disc: its charge, then its tank (dark = empty)
+BATTERY_COLOUR = (120, 230, 60)
+TANK_COLOUR = (40, 120, 255)
 MIN_DRONE_RADIUS_PX = 3.0
 
 
@@ -411,8 +414,10 @@ class DroneOverlay:
     a white outline. With ``explorers`` (a second DroneSim of the same envs, e.g. the planner's ExploreAgents)
     each explorer is a white diamond with a dark rim. Layers go groundstation, explorers, view squares, goals,
     discs, so drones are never hidden; within a layer drones are drawn in id order by a serial loop, so
-    overlapping marks always come out the same. Positions are read from the DroneSims' fields at each call
-    (north up like the cells: metres along rows go down the image). Sizes come from :func:`mark_sizes`.
+    overlapping marks always come out the same. With a battery (``drones.energy``) and / or the water limit, two
+    bars under each disc, as wide as it, fill with the battery's charge and the tank's fill. Positions are read
+    from the DroneSims' fields at each call (north up like the cells: metres along rows go down the image). Sizes
+    come from :func:`mark_sizes`.
     """
 
     def __init__(self, drones, env: int = 0, explorers=None):
@@ -486,6 +491,32 @@ class DroneOverlay:
                     image[py, px] = self.palette[d]
                 elif d2 <= outer * outer:
                     image[py, px] = rim
+        if ti.static(dr.use_energy or dr.use_water):
+            self._draw_bars(image, env, px_per_m, radius, ti.max(2, cell_px // 10))
+
+    @ti.func
+    def _draw_bars(self, image: ti.template(), env, px_per_m, radius, height):
+        """Per drone, rows under its disc: the battery's charge, then the tank's fill, as filled fractions of a
+        bar as wide as the disc on a dark background."""
+        dr = self.drones
+        rim = ti.Vector(DRONE_RIM, ti.u8)
+        ti.loop_config(serialize=True)
+        for d in range(dr.num_drones):
+            c = dr.pos[env, d] * px_per_m
+            width = ti.cast(2.0 * radius + 2.0, ti.i32)
+            c0 = ti.floor(c[1] - radius - 1.0, ti.i32)
+            row = ti.floor(c[0] + radius + 2.0, ti.i32)
+            if ti.static(dr.use_energy):
+                fill = ti.math.clamp(dr.energy[env, d] / dr.battery, 0.0, 1.0)
+                _fill_rect(image, row, row + height, c0, c0 + width, rim)
+                _fill_rect(image, row, row + height, c0, c0 + ti.round(fill * width, ti.i32),
+                           ti.Vector(BATTERY_COLOUR, ti.u8))
+                row += height + 1
+            if ti.static(dr.use_water):
+                fill = ti.math.clamp(dr.water[env, d] / dr.capacity, 0.0, 1.0)
+                _fill_rect(image, row, row + height, c0, c0 + width, rim)
+                _fill_rect(image, row, row + height, c0, c0 + ti.round(fill * width, ti.i32),
+                           ti.Vector(TANK_COLOUR, ti.u8))
 
 
 def drone_overlay(drones, env: int = 0) -> DroneOverlay:
@@ -536,7 +567,8 @@ class EnvZeroFrames:
         if self._classes is None:
             self._classes = tuple(class_histogram(self.drones.fire.land_map))
         return frame_legend(self.drones.num_drones, explorers=self.explorers is not None,
-                            known_fires=self.known_fires is not None, classes=self._classes)
+                            known_fires=self.known_fires is not None, classes=self._classes,
+                            battery=self.drones.use_energy, tank=self.drones.use_water)
 
     def close(self) -> None:
         """Release the window claim but keep the renderer: its fields and kernels are reused when the env's
@@ -549,7 +581,8 @@ BURNED_LABEL = "burned out"
 
 
 def frame_legend(num_drones: int = 0, explorers: bool = False, known_fires: bool = False,
-                 classes: tuple[int, ...] | list[int] = ()) -> list[LegendItem]:
+                 classes: tuple[int, ...] | list[int] = (), battery: bool = False,
+                 tank: bool = False) -> list[LegendItem]:
     """The legend of a frame: the drones (``num_drones``, 0 for the fire alone; with their view, goal and the
     groundstation), the planner's ``explorers``, the fire (seen and unseen with a ``known_fires`` map), the
     states water and fire leave (put out, flooded, burned out), fire particles, and each land-cover class of
@@ -565,6 +598,10 @@ def frame_legend(num_drones: int = 0, explorers: bool = False, known_fires: bool
         items.append(LegendItem("diamond", EXPLORER_COLOUR, "explorer"))
     if colours:
         items.append(LegendItem("square", GROUNDSTATION_COLOUR, "groundstation"))
+    if colours and battery:
+        items.append(LegendItem("cell", BATTERY_COLOUR, "battery (bar under a drone)"))
+    if colours and tank:
+        items.append(LegendItem("cell", TANK_COLOUR, "water in its tank (bar)"))
     table = cell_colours()
     burning = tuple(int(v) for v in table[BURNING, 0])
     if known_fires:

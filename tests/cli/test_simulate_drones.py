@@ -13,10 +13,10 @@ from click.testing import CliRunner
 from PIL import Image
 
 from roshan.cli import main
-from roshan.config import Config, DroneConfig, FlyConfig
+from roshan.config import Config, DroneConfig, EnergyConfig, FlyConfig
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import random_actions, straight_to_goal
-from roshan.kernels.render import FrameRenderer, drone_colours, drone_overlay
+from roshan.kernels.render import BATTERY_COLOUR, TANK_COLOUR, FrameRenderer, drone_colours, drone_overlay
 from roshan.tools.simulate import DRONE_SERIES_KEYS, SERIES_KEYS
 
 CELLS_PER_STEP = 0.1  # v_max * dt / cell size with the default drone physics (10 m/s, 0.1 s, 10 m)
@@ -142,3 +142,24 @@ def test_simulate_rejects_bad_drone_options():
     assert r.exit_code != 0 and "--policy needs --drones" in r.output
     r = CliRunner().invoke(main, ["simulate", "--drones", "2", "--policy", "smart", "--steps", "1"])
     assert r.exit_code != 0 and "'smart' is not one of" in r.output
+
+
+def test_with_a_battery_and_a_tank_each_drone_carries_its_charge_and_fill_as_bars():
+    cfg = Config(drones=DroneConfig(num_drones=1, use_water_limit=True, energy=EnergyConfig(preset="scenario")))
+    env = FlyVectorEnv(1, cfg, seed=2)
+    env.reset(seed=2)
+    env.drones.set_state(np.array([[[95.0, 152.5]]]), np.zeros((1, 1, 2)))
+    battery = cfg.drones.energy.values()["capacity"]
+    env.drones.energy.from_numpy(np.full((1, 1), battery / 2, np.float32))  # half charged
+    env.drones.water.from_numpy(np.full((1, 1), cfg.drones.water_capacity / 4, np.float32))  # a quarter full
+    renderer = FrameRenderer(env.fire, cell_px=10, backend="raster", particles=False, wind_arrow=False)
+    img = renderer.render(overlay=drone_overlay(env.drones))
+    rows = {}
+    for name, colour in (("battery", BATTERY_COLOUR), ("tank", TANK_COLOUR)):
+        hit = (img == np.asarray(colour, np.uint8)).all(-1)
+        ys, xs = hit.nonzero()
+        assert ys.size and 95 < ys.min() and np.ptp(xs) < 12, f"the {name} bar sits under the disc"
+        rows[name] = ys.min(), hit[ys.min()].sum()
+    assert rows["tank"][0] > rows["battery"][0]  # the tank's bar below the battery's
+    assert abs(rows["battery"][1] - 2 * rows["tank"][1]) <= 1  # half a bar against a quarter of one
+    env.close()
