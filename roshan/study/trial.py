@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 import signal
 import socket
+import threading
 import zlib
 from collections.abc import Callable
 from pathlib import Path
@@ -101,6 +102,19 @@ def make_objective(recipe: Recipe, root: str | Path, name: str, slot: int = 0, l
     return objective
 
 
+def watch_interrupts() -> list[int]:
+    """A list that records each SIGINT this process receives from now on (each still raises KeyboardInterrupt);
+    empty and unwatched off the main thread, where no signal handler can be set."""
+    received: list[int] = []
+    if threading.current_thread() is threading.main_thread():
+        def on_sigint(signum, frame):
+            received.append(signum)
+            raise KeyboardInterrupt
+
+        signal.signal(signal.SIGINT, on_sigint)
+    return received
+
+
 def run_worker(storage_url: str, name: str, root: str | Path, slot: int = 0, local: dict | None = None,
                quiet: bool = False, heartbeat: int | None = 60, max_retry: int | None = 3) -> int:
     """Run one trial of the study (or nothing when its budget is spent) and return the exit code: 0, or 130
@@ -114,10 +128,15 @@ def run_worker(storage_url: str, name: str, root: str | Path, slot: int = 0, loc
     host = socket.gethostname() if is_url(storage_url) else ""  # machines sharing a database sample differently
     seed = zlib.crc32(f"{recipe.seed}/{len(study.trials)}/{slot}/{host}".encode())
     study.sampler = tpe_sampler(recipe, seed)
+    interrupted = watch_interrupts()
     try:
         # A sampled combination the config rejects (ValueError, e.g. horizon vs num_envs) fails only its trial.
         study.optimize(make_objective(recipe, root, name, slot, local, quiet), n_trials=1, catch=(ValueError,))
-    except KeyboardInterrupt:
+    except BaseException as e:
+        # A Ctrl-C that lands inside Optuna's journal lock surfaces as that lock's cleanup error (its release
+        # retries an unlink the interrupted one already did): the flag, not the exception's type, says why.
+        if not (isinstance(e, KeyboardInterrupt) or interrupted):
+            raise
         signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C must not cut the requeue short
         me = worker_record()
         for t in study.get_trials(deepcopy=False, states=(TrialState.FAIL,)):
