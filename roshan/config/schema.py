@@ -190,14 +190,26 @@ def replace(cfg, **changes):
 
 def all_keys(cls: type, prefix: str = "") -> list[str]:
     """Every dotted key of a config class (for help texts and suggestions)."""
+    return list(_keys(cls, prefix))
+
+
+@functools.cache
+def _keys(cls: type, prefix: str = "") -> tuple[str, ...]:
+    """:func:`all_keys`, once per class: an override checks its key against them (the experiment spec resolves
+    hundreds of runs, each with several overrides, and the type hints behind them cost ~0.03 s a lookup)."""
     keys = []
     for f in dataclasses.fields(cls):
-        hint = typing.get_type_hints(cls)[f.name]
+        hint = _hints(cls)[f.name]
         if dataclasses.is_dataclass(hint):
-            keys += all_keys(hint, f"{prefix}{f.name}.")
+            keys += _keys(hint, f"{prefix}{f.name}.")
         else:
             keys.append(prefix + f.name)
-    return keys
+    return tuple(keys)
+
+
+@functools.cache
+def _key_set(cls: type) -> frozenset[str]:
+    return frozenset(_keys(cls))
 
 
 def _apply_override(data: dict, item: str, cls: type, moved: dict[str, str]) -> str:
@@ -206,7 +218,7 @@ def _apply_override(data: dict, item: str, cls: type, moved: dict[str, str]) -> 
         raise ConfigError(f"--set {item!r}: expected section.key=value")
     dotted, raw = item.split("=", 1)
     dotted = moved.get(dotted.strip(), dotted.strip())
-    if dotted not in all_keys(cls):
+    if dotted not in _key_set(cls):
         raise ConfigError(f"--set: unknown key {dotted.strip()!r}{suggest(dotted.strip(), all_keys(cls))}")
     try:
         value = yaml.safe_load(raw)
@@ -217,7 +229,7 @@ def _apply_override(data: dict, item: str, cls: type, moved: dict[str, str]) -> 
 
 
 def _set_key(data: dict, dotted: str, value: Any, cls: type, where: str = "") -> None:
-    if dotted not in all_keys(cls):
+    if dotted not in _key_set(cls):
         raise ConfigError(f"{where or dotted}: unknown key {dotted!r}{suggest(dotted, all_keys(cls))}")
     parts = dotted.split(".")
     node = data

@@ -39,6 +39,7 @@ import hashlib
 import json
 import re
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -106,13 +107,22 @@ class Condition:
         default)."""
         if any(item.split("=", 1)[0].strip() == dotted for item in self.sets):
             return True
-        data = (yaml.safe_load(Path(self.config).read_text()) or {}) if self.config else {}
         section, key = dotted.split(".", 1)
-        return isinstance(data.get(section), dict) and key in data[section]
+        return isinstance(self._file_data.get(section), dict) and key in self._file_data[section]
 
     def run_config(self, seed: int, extra: tuple[str, ...] = ()) -> Config:
         """The config of this condition's run with ``seed`` (the condition's overrides, then ``extra``)."""
-        return apply_overrides(load_config(self.config), [*self.sets, *extra, f"sim.seed={seed}"])
+        return apply_overrides(self._file_config, [*self.sets, *extra, f"sim.seed={seed}"])
+
+    # Read once per condition (a spec is loaded anew for each command): fingerprinting the thesis spec resolves
+    # every run's config, ten seeds and a dozen keys of record per condition.
+    @cached_property
+    def _file_data(self) -> dict:
+        return (yaml.safe_load(Path(self.config).read_text()) or {}) if self.config else {}
+
+    @cached_property
+    def _file_config(self) -> Config:
+        return load_config(self.config)
 
 
 @dataclass(frozen=True)
