@@ -59,6 +59,16 @@ def _number_list(text: str, option: str, kind: type, lowest: float, highest: flo
     return values
 
 
+def _name_list(ctx, param, value):
+    """A comma-separated option as its names (``--maps A,B,C``), or a usage error where it names none."""
+    if value is None:
+        return None
+    names = [x.strip() for x in value.split(",") if x.strip()]
+    if not names:
+        raise click.BadParameter(f"expected comma-separated names, got {value!r}")
+    return names
+
+
 @contextlib.contextmanager
 def reported(*extra: type[Exception]):
     """The one place where what a user's input can cause becomes one line and exit code 1, not a traceback:
@@ -282,12 +292,16 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
               help="Also run this scripted policy on the same episodes and print both side by side.")
 @click.option("--save-buffer", nargs=2, type=(click.IntRange(min=1), click.Path(dir_okay=False)), default=None,
               metavar="N FILE", help="Instead: record N transitions of the deterministic policy (an IQL dataset).")
+@click.option("--maps", default=None, callback=_name_list, metavar="A,B,C",
+              help="A map suite: one evaluation per map (bundled name or GeoTIFF path) in DIR/<map>/, and "
+                   "DIR/maps.md and maps.json with one row per map (DIR: --out, else beside single evaluations as "
+                   "maps-<seed>-<episodes>-<hash>).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @SETS
 @ARCH
 @THREADS
 def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, replace, frames_dir, gif_path, baseline,
-             save_buffer, quiet, sets, arch, threads):
+             save_buffer, maps, quiet, sets, arch, threads):
     """Evaluate a trained FlyAgent or planner (a run folder or a checkpoint file) with deterministic actions.
 
     Prints a thesis-style table (success rate with its Wilson interval, failure reasons, TTE mean ± std
@@ -298,9 +312,19 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, replace, f
     --checkpoint, --envs, --arch where they differ from the defaults; a model shipped in models/ has its folders in
     out/eval/<model>/ instead, so the checkout stays clean); an output that already holds results is
     refused unless --replace. Every summary JSON records the command, overrides, checkpoint and code version.
+
+    --maps A,B,C evaluates on each map as --set map.name=MAP would, prints each map's table as it ends and then
+    one row per map (success, median TTE, drones lost with a battery, ratio of the median TTEs).
     """
+    if maps is not None:
+        single = [name for name, value in (("--frames", frames_dir), ("--gif", gif_path), ("--json", json_path),
+                                           ("--save-buffer", save_buffer)) if value is not None]
+        if single:
+            raise click.UsageError(f"--maps cannot be combined with {', '.join(single)} (they are for a single "
+                                   "evaluation; a map suite writes DIR/<map>/ and DIR/maps.json)")
+        _eval_maps(target, maps, episodes, seed, envs, which, out_dir, replace, baseline, quiet, sets, arch, threads)
+        return
     from roshan.runs import evaluate as ev
-    from roshan.runs.report.tables import format_comparison, format_table
     from roshan.runtime import init_taichi
 
     with reported():
@@ -316,15 +340,40 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, replace, f
                                   frames_dir=Path(frames_dir) if frames_dir else None,
                                   gif_path=Path(gif_path) if gif_path else None, which=which,
                                   progress_bar=not quiet, overrides=sets, baseline=baseline, replace=replace)
-    title = f"{target} ({Path(summary['checkpoint']).stem}, seed {seed})"
-    if baseline is not None:  # the column says which baseline played (the planner's greedy: original or fixed)
+    _echo_evaluation(summary, f"{target} ({Path(summary['checkpoint']).stem}, seed {seed})", baseline)
+    click.echo(f"files: {summary['out_dir']}")
+
+
+def _echo_evaluation(summary: dict, title: str, baseline: str | None) -> None:
+    """An evaluation's table; with a baseline both side by side, the column naming which one played (the
+    planner's greedy: original or fixed), and its note under the table."""
+    from roshan.runs.report.tables import format_comparison, format_table
+
+    if baseline is not None:
         click.echo(format_comparison({"policy": summary, summary.get("baseline_name", baseline): summary["baseline"]},
                                      title))
         if summary.get("baseline_note"):
             click.echo(summary["baseline_note"])
     else:
         click.echo(format_table(summary, title))
-    click.echo(f"files: {summary['out_dir']}")
+
+
+def _eval_maps(target, maps, episodes, seed, envs, which, out_dir, replace, baseline, quiet, sets, arch, threads):
+    """``roshan eval TARGET --maps A,B,C``: each map's table as it ends, then the suite's."""
+    from roshan.runs.map_suite import evaluate_maps
+    from roshan.runtime import init_taichi
+
+    def echo_map(name: str, summary: dict) -> None:
+        _echo_evaluation(summary, f"{target} on {name} ({Path(summary['checkpoint']).stem}, seed {seed})", baseline)
+        click.echo(f"files: {summary['out_dir']}\n")
+
+    with reported():
+        init_taichi(arch or "cpu", threads)
+        suite = evaluate_maps(target, maps, episodes=episodes, seed=seed, num_envs=envs,
+                              out_dir=Path(out_dir) if out_dir else None, which=which, progress_bar=not quiet,
+                              overrides=sets, baseline=baseline, replace=replace, on_map=echo_map)
+    click.echo(suite["table"])
+    click.echo(f"files: {suite['out_dir']} (maps.md, maps.json, one folder per map)")
 
 
 @main.command()

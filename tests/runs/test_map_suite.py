@@ -1,0 +1,94 @@
+"""`roshan eval RUN --maps A,B,C`: one evaluation per map, each as `--set map.name=MAP` makes it, in its own folder,
+and a summary with one row per map; maps that cannot be evaluated and single-evaluation options are refused before
+anything is written."""
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from roshan.cli import main
+from roshan.runs.map_suite import map_row, write_suite_summary
+from roshan.runs.report.stats import summarize
+
+ROOT = Path(__file__).resolve().parents[2]
+PLANNER = ROOT / "models/planner"
+MAPS = ("15x15_Woods", "21x21_Field")
+TINY = ("--episodes", 2, "--envs", 2, "--quiet", "--set", "ignition.fire_percentage=0.02")
+
+
+def cli(*args):
+    return CliRunner().invoke(main, [str(a) for a in args], catch_exceptions=False)
+
+
+@pytest.mark.slow
+def test_a_suite_writes_one_evaluation_per_map_and_a_summary_of_them(tmp_path):
+    out = tmp_path / "suite"
+    res = cli("eval", PLANNER, "--maps", ",".join(MAPS), "--baseline", "greedy", "--out", out, *TINY)
+    assert res.exit_code == 0, res.output
+
+    rows = json.loads((out / "maps.json").read_text())["maps"]
+    assert [r["map"] for r in rows] == list(MAPS)
+    for name, row in zip(MAPS, rows, strict=True):
+        folder = out / name
+        assert (folder / "episodes.csv").is_file() and (folder / "greedy" / "episodes.csv").is_file()
+        policy = json.loads((folder / "summary.json").read_text())
+        greedy = json.loads((folder / "greedy" / "summary.json").read_text())
+        # the map's evaluation is the single one with --set map.name=MAP added after the user's --set
+        assert policy["provenance"]["overrides"] == ["ignition.fire_percentage=0.02", f"map.name={name}"]
+        assert row["policy"]["success_rate"] == policy["success_rate"]
+        assert row["policy"]["tte_median"] == policy["tte"]["median"]
+        assert row["baseline"]["success_rate"] == greedy["success_rate"]
+        assert row["baseline"]["tte_median"] == greedy["tte"]["median"]
+        assert row["tte_median_ratio"] == pytest.approx(policy["tte"]["median"] / greedy["tte"]["median"])
+        assert row["cells"] == {"15x15_Woods": 225, "21x21_Field": 441}[name]
+        assert f"models/planner on {name} (best_eval, seed 0)" in res.output  # each map's own table
+        assert f"| {name} | {row['cells']}" in (out / "maps.md").read_text()
+    assert res.output.count("Success rate") == len(MAPS)
+    assert (out / "maps.md").read_text().strip() in res.output  # the summary table is printed at the end
+    provenance = json.loads((out / "maps.json").read_text())["provenance"]
+    assert "--maps 15x15_Woods,21x21_Field" in provenance["command"] and "map.name" not in provenance["command"]
+
+    # the same suite again: refused before any episode runs, naming the folder and both ways out
+    before = (out / "maps.json").read_bytes()
+    res = cli("eval", PLANNER, "--maps", ",".join(MAPS), "--baseline", "greedy", "--out", out, *TINY)
+    assert res.exit_code != 0 and str(out) in res.output and "--replace" in res.output
+    assert (out / "maps.json").read_bytes() == before
+
+
+def test_a_map_that_cannot_load_is_refused_before_anything_is_written(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # the default folder would go under ./out
+    res = cli("eval", PLANNER, "--maps", "15x15_Woods,Nowhere_Woods", *TINY)
+    assert res.exit_code == 1
+    assert "'Nowhere_Woods' cannot be evaluated" in res.output and "bundled maps: 15x15_Woods" in res.output
+    (tmp_path / "bad.tif").write_text("not a raster")
+    res = cli("eval", PLANNER, "--maps", f"21x21_Field,{tmp_path / 'bad.tif'}", "--out", tmp_path / "suite", *TINY)
+    assert res.exit_code == 1 and "bad.tif' cannot be evaluated" in res.output and "not a readable raster" in res.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.tif"]
+
+
+def test_maps_with_single_evaluation_outputs_is_a_usage_error(tmp_path):
+    res = cli("eval", PLANNER, "--maps", ",".join(MAPS), "--gif", tmp_path / "a.gif", *TINY)
+    assert res.exit_code == 2 and "--maps cannot be combined with --gif" in res.output
+    assert not (tmp_path / "a.gif").exists()
+
+
+def test_the_summary_has_drones_lost_columns_with_a_battery(tmp_path):
+    from roshan.maps import load_map
+
+    def summary(times, lost):
+        n = len(times)
+        return summarize({"time": times, "success": [1] * n, "reason": ["none"] * n, "drones_lost": lost,
+                          "battery_swaps": [0] * n, "energy_used": [1.0] * n, "base_time": [0.0] * n}, dt=0.1)
+
+    planner = summary([100, 300, 200], [0, 1, 2]) | {"baseline_name": "greedy (fixed)"}
+    planner["baseline"] = summary([400, 400, 100], [3, 3, 0])
+    row = map_row("15x15_Woods", load_map("15x15_Woods"), planner)
+    assert row["policy"]["drones_lost"] == 1.0 and row["baseline"]["drones_lost"] == 2.0
+    assert row["tte_median_ratio"] == 0.5
+    table = write_suite_summary([row], tmp_path, "suite", {"command": "roshan eval"})
+    assert "policy drones lost (mean)" in table and "greedy (fixed) drones lost (mean)" in table
+    assert "| 15x15_Woods | 225 (15 x 15) | 100.0 % | 200.0 | 100.0 % | 400.0 | 1.00 | 2.00 | 0.50 |" in table
+    assert (tmp_path / "maps.md").read_text() == table + "\n"
+    assert json.loads((tmp_path / "maps.json").read_text())["maps"] == [row]
