@@ -271,7 +271,8 @@ def evaluation_name(seed: int, episodes: int, settings: dict) -> str:
     return f"{seed}-{episodes}" + (f"-{settings_hash(settings)}" if settings else "")
 
 
-def _default_checkpoint(run_dir: Path) -> Path | None:
+def default_checkpoint(run_dir: Path) -> Path | None:
+    """The checkpoint `roshan eval RUN` takes without --checkpoint (None for a checkpoint file outside a run)."""
     try:
         return resolve_checkpoint(run_dir, "best")
     except FileNotFoundError:
@@ -362,7 +363,7 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         # what changes the results besides seed and episodes, where it differs from `roshan eval RUN`'s default
         default_envs = max(1, min(cfg.train.eval_envs, episodes))
         settings = {"overrides": list(overrides), "baseline": baseline, "envs": E if E != default_envs else None,
-                    "checkpoint": path.name if path != _default_checkpoint(run_dir) else None,
+                    "checkpoint": path.name if path != default_checkpoint(run_dir) else None,
                     "arch": arch if arch != "cpu" else None}
         out_dir = eval_root(run_dir) / evaluation_name(seed, episodes, {k: v for k, v in settings.items() if v})
     out = Path(out_dir)

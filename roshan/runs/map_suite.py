@@ -18,7 +18,7 @@ from roshan.checkpoints import config_of_checkpoint, load_checkpoint, resolve_ch
 from roshan.config import Config, apply_overrides
 from roshan.io import OutputError, write_atomic, writing
 from roshan.maps import LandCoverMap, MapError, check_drone_map, load_map
-from roshan.runs.evaluate import eval_root, evaluate_run, evaluation_name, held_results, output_lock
+from roshan.runs.evaluate import default_checkpoint, eval_root, evaluate_run, evaluation_name, held_results, output_lock
 from roshan.runtime import current_arch
 
 SUMMARY_FILES = ("maps.md", "maps.json")
@@ -63,13 +63,6 @@ def check_maps(maps: Sequence[str], trained: Config, overrides: Sequence[str] = 
     return lands
 
 
-def _default_checkpoint(run_dir: Path) -> Path | None:
-    try:
-        return resolve_checkpoint(run_dir, "best")
-    except FileNotFoundError:  # a checkpoint file outside a run folder
-        return None
-
-
 def suite_folder(run_dir: Path, checkpoint: Path, trained: Config, maps: Sequence[str], seed: int, episodes: int,
                  num_envs: int | None, overrides: Sequence[str], baseline: str | None) -> Path:
     """Where a suite goes without ``--out``: beside the run's single evaluations (:func:`eval_root`), named
@@ -80,7 +73,7 @@ def suite_folder(run_dir: Path, checkpoint: Path, trained: Config, maps: Sequenc
     arch = current_arch() or "cpu"
     settings = {"maps": list(maps), "overrides": list(overrides), "baseline": baseline,
                 "envs": envs if envs != default_envs else None,
-                "checkpoint": checkpoint.name if checkpoint != _default_checkpoint(run_dir) else None,
+                "checkpoint": checkpoint.name if checkpoint != default_checkpoint(run_dir) else None,
                 "arch": arch if arch != "cpu" else None}
     return eval_root(run_dir) / f"maps-{evaluation_name(seed, episodes, {k: v for k, v in settings.items() if v})}"
 
