@@ -69,6 +69,7 @@ class DroneSim:
         self.speed_power = energy.get("speed_power", 0.0)
         self.payload_power = energy.get("payload_power", 0.0)
         self.swap_steps = max(1, round(energy.get("swap_time", 0.0) / self.dt))  # steps landed for a full battery
+        self.queue_energy = self.base_queue_energy()
 
         # field_bytes() counts these: keep it in step with them
         self.pos = ti.Vector.field(2, ti.f32, (E, N))
@@ -104,6 +105,20 @@ class DroneSim:
         per_drone = 8 + 8 + 4 + 4 + 8 + 4 + 4 + 4 + 4 + 4 + 4 + 4 + 6 * 4  # pos ... refilling, energy ... base_steps
         per_env = n * per_drone + n * n * (16 + 4) + 8 + 4  # + neighbours, their mask, groundstation, _all
         return num_envs * (per_env + 4 * n)
+
+    def base_queue_energy(self) -> float:
+        """Joules a drone draws waiting at the groundstation while every other drone is served before it (issue 33):
+        (N - 1) x the time one drone stays on the cell (a swap, or a refill with the water limit, whichever is longer)
+        x the power of flying at v_max along one axis with a full tank (drones jostling beside the cell drew 135 W
+        on average, 147 W at the 90th percentile, with the scenario battery: 145 W by this formula). 0 without a
+        battery."""
+        if not self.use_energy:
+            return 0.0
+        service = self.swap_steps
+        if self.use_water:
+            service = max(service, math.ceil((self.cfg.recharge_time + 1e-4) / self.dt))
+        power = self.hover_power + self.speed_power * self.v_max * self.v_max + self.payload_power
+        return (self.num_drones - 1) * service * self.dt * power
 
     # ------------------------------------------------------------------------------------------ public API
 
@@ -277,6 +292,15 @@ class DroneSim:
         speed_sq = self.v_max * self.v_max * (1.0 + ratio * ratio)
         power = self.hover_power + self.speed_power * speed_sq + self.payload_power
         return power * long_axis / self.v_max
+
+    @ti.func
+    def hold_action(self, e, d):
+        """The action that keeps drone d where it is: no velocity command, or in acceleration mode the one that brakes
+        it (landed at the groundstation, :meth:`roshan.kernels.tasks.GoalRules.is_landed`)."""
+        a = ti.Vector([0.0, 0.0])
+        if ti.static(self.use_accel):
+            a = ti.math.clamp(-self.vel[e, d] / (self.accel * self.dt), -1.0, 1.0)
+        return a
 
     @ti.func
     def is_stocked(self, e, d) -> ti.i32:

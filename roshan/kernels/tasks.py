@@ -143,8 +143,9 @@ class GoalRules:
         sensor: an object whose ``observe_drone(e, drones, d)`` runs right after the move (the planner's fire
             map), or None.
         resources: with a battery (``drones.energy``), the resource-aware heuristic: a drone flies home once its
-            battery holds no more than (1 + ``energy_margin``) times what flying home takes, or its tank is
-            empty, waits there until both are full, and then takes the nearest free fire.
+            battery holds no more than (1 + ``energy_margin``) times what flying home takes plus what waiting there
+            for every other drone's turn takes (:meth:`roshan.kernels.drones.DroneSim.base_queue_energy`), or its
+            tank is empty, lands there (:meth:`is_landed`) until both are full, and then takes the nearest free fire.
     """
 
     def __init__(self, drones, candidates, *, mode: int, water_policy: bool = False, sticky: bool = False,
@@ -166,7 +167,11 @@ class GoalRules:
     @ti.func
     def drone_step(self, e, d, action) -> ti.i32:
         """Move drone d, let the sensor see, apply the goal rules; 1 if it put out the map's last fire."""
-        self.drones.move_drone(e, d, action)
+        a = action
+        if ti.static(self.resources):
+            if self.is_landed(e, d) != 0:
+                a = self.drones.hold_action(e, d)
+        self.drones.move_drone(e, d, a)
         if ti.static(self.has_sensor):
             self.sensor.observe_drone(e, self.drones, d)
         last = 0
@@ -222,12 +227,26 @@ class GoalRules:
             home = 0
             self.retarget(e, d)
         elif home == 0:
-            low = dr.energy[e, d] <= (1.0 + self.energy_margin) * dr.energy_to_groundstation(e, d)
+            need = (1.0 + self.energy_margin) * dr.energy_to_groundstation(e, d) + dr.queue_energy
+            low = dr.energy[e, d] <= need
             if low or dr.has_water(e, d) == 0:
                 dr.refilling[e, d] = 1
                 home = 1
                 take_cell(dr, e, d, -1)  # its fire is free for the others
         return home
+
+    @ti.func
+    def is_landed(self, e, d) -> ti.i32:
+        """The resource-aware heuristic lands a drone that waits at the groundstation (sent home until stocked, or
+        idle there without a fire): on the groundstation cell it stays put instead of following the FlyAgent.
+        Issue 33: hovering there, the collision-trained FlyAgent jostled the drones that waited at once (and the
+        ones lost beside the cell) off it and on again, so none stayed the swap's 3 s in a row; they waited 100-170 s
+        beside the base and came down there (26 of 64 drones in 16 endurance episodes)."""
+        dr = self.drones
+        waits = dr.refilling[e, d]
+        if waits == 0:
+            waits = ti.cast(dr.heads_home(e, d) != 0 and dr.goal_cell[e, d] < 0, ti.i32)
+        return ti.cast(waits != 0 and dr.at_groundstation(e, d) != 0, ti.i32)
 
     @ti.func
     def extinguish_at_goal(self, e, d) -> ti.i32:

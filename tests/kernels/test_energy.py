@@ -126,6 +126,19 @@ def test_the_energy_of_the_flight_home_is_the_quickest_flights():
     assert energy_home(d) == 0.0
 
 
+def test_the_reserve_for_a_queue_at_the_base_is_every_other_drones_turn_there():
+    fire = FireSim(load_map("35x36_Woods"), ignition=IgnitionConfig(fire_percentage=0.0), num_envs=1, seed=0)
+
+    def reserve(drones, preset="scenario", **cfg):
+        return DroneSim(fire, DroneConfig(num_drones=drones, energy=EnergyConfig(preset=preset), **cfg)).queue_energy
+
+    # 3 others x the 3 s swap x 145 W (100 hover + 0.25 x 10^2 at v_max + 20 with a full tank)
+    assert reserve(4) == pytest.approx(3 * 3.0 * 145.0)
+    # a 5 s refill outlasts the swap: ceil((5 + 1e-4) / 0.1) = 51 steps
+    assert reserve(4, use_water_limit=True, recharge_time=5.0) == pytest.approx(3 * 5.1 * 145.0)
+    assert reserve(1) == 0.0 and reserve(4, preset="off") == 0.0
+
+
 def test_a_swap_on_the_groundstation_restores_the_battery_after_the_set_time():
     d = make(swap_time=2.0)  # 20 steps landed
     put(d, AWAY)
