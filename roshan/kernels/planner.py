@@ -109,9 +109,9 @@ class PlannerKernels(EpisodeKernels):
         if greedy:
             self.rules = GoalRules(drones, KnownFires(fire, maps), mode=EXTINGUISH, wake_idle=True,
                                    wake_reserved=not greedy_home_fixed, sensor=maps, resources=greedy_resources,
-                                   energy_margin=energy_margin)
+                                   energy_margin=energy_margin, land=True)
         else:
-            self.rules = GoalRules(drones, BurningCells(fire), mode=DROP_ANYWHERE, sensor=maps)
+            self.rules = GoalRules(drones, BurningCells(fire), mode=DROP_ANYWHERE, sensor=maps, land=True)
         E, N = fire.num_envs, drones.num_drones
         self.finished = ti.field(ti.i32, E)  # greedy: ended inside this planner step, skip the rest of it
         self.objective = ti.field(ti.i32, E)  # a drone put out the last burning cell in this planner step

@@ -145,16 +145,19 @@ class GoalRules:
         resources: with a battery (``drones.energy``), the resource-aware heuristic: a drone flies home once its
             battery holds no more than (1 + ``energy_margin``) times what flying home takes plus what waiting there
             for every other drone's turn takes (:meth:`roshan.kernels.drones.DroneSim.base_queue_energy`), or its
-            tank is empty, lands there (:meth:`is_landed`) until both are full, and then takes the nearest free fire.
+            tank is empty, waits there until both are full, and then takes the nearest free fire.
+        land: with a battery, a drone that waits at the groundstation lands on its cell (:meth:`is_landed`) instead
+            of following the FlyAgent: the planner's level sets it for the planner and both heuristics alike.
     """
 
     def __init__(self, drones, candidates, *, mode: int, water_policy: bool = False, sticky: bool = False,
                  wake_idle: bool = False, wake_reserved: bool = True, sensor=None, resources: bool = False,
-                 energy_margin: float = 0.25):
+                 energy_margin: float = 0.25, land: bool = False):
         self.drones, self.candidates, self.mode = drones, candidates, mode
         self.water_policy, self.sticky, self.wake_idle = water_policy, sticky, wake_idle
         self.wake_reserved = wake_reserved
         self.resources = resources and drones.use_energy
+        self.land = land and drones.use_energy
         self.energy_margin = energy_margin
         self.sensor = sensor
         self.has_sensor = sensor is not None  # read in ti.static (no "is" in Taichi scope)
@@ -168,7 +171,7 @@ class GoalRules:
     def drone_step(self, e, d, action) -> ti.i32:
         """Move drone d, let the sensor see, apply the goal rules; 1 if it put out the map's last fire."""
         a = action
-        if ti.static(self.resources):
+        if ti.static(self.land):
             if self.is_landed(e, d) != 0:
                 a = self.drones.hold_action(e, d)
         self.drones.move_drone(e, d, a)
@@ -237,11 +240,12 @@ class GoalRules:
 
     @ti.func
     def is_landed(self, e, d) -> ti.i32:
-        """The resource-aware heuristic lands a drone that waits at the groundstation (sent home until stocked, or
-        idle there without a fire): on the groundstation cell it stays put instead of following the FlyAgent.
-        Issue 33: hovering there, the collision-trained FlyAgent jostled the drones that waited at once (and the
-        ones lost beside the cell) off it and on again, so none stayed the swap's 3 s in a row; they waited 100-170 s
-        beside the base and came down there (26 of 64 drones in 16 endurance episodes)."""
+        """Drone d waits at the groundstation (sent home until stocked, or there without a fire: the planner's
+        groundstation goal or an idle heuristic drone) and is on its cell: it stays put instead of following the
+        FlyAgent (``land``). Issue 33: hovering there, the collision-trained FlyAgent jostled the drones that waited
+        at once (and the ones lost beside the cell) off it and on again, so none stayed the swap's 3 s in a row; they
+        waited 100-170 s beside the base and came down there (26 of 64 drones in 16 endurance episodes of the aware
+        greedy)."""
         dr = self.drones
         waits = dr.refilling[e, d]
         if waits == 0:

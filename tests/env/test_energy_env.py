@@ -182,3 +182,26 @@ def test_drone_lost_pays_its_penalty_once_for_each_drone_that_came_down():
     assert not bool(running.any()) and lost.tolist() == [3.0, 3.0]
     torch.testing.assert_close(total, torch.full((2,), -6.0))  # the only term: 3 drones x -2, each once
     env.close()
+
+
+def test_planner_drones_sent_home_together_land_there_and_get_their_swap():
+    """The planner sends all three drones home at once: each lands on the groundstation cell (its position no longer
+    changes while its goal is home, whatever the FlyAgent would do there) and gets its battery swapped. Hovering
+    instead, the FlyAgent moved them about the cell, and several at once jostled each other off it (issue 33)."""
+    env = planner_env(EnergyConfig(preset="scenario"))
+    env.reset(seed=4)
+    for _ in range(12):  # out to the first listed fire: the batteries drain
+        env.step(torch.ones((2, 3), dtype=torch.long))
+    dr = env.drones
+    gs = dr.groundstation.to_numpy()[:, None, :]
+    landed_at = {}
+    for step in range(150):
+        env.step(torch.zeros((2, 3), dtype=torch.long))  # candidate 0: the groundstation
+        pos = dr.pos.to_numpy()
+        on_base = (np.floor(pos / dr.cell).astype(int) == gs).all(-1)  # pos and the cell: (row, column)
+        for e, d in zip(*np.nonzero(on_base), strict=True):
+            landed_at.setdefault((e, d), pos[e, d].copy())
+            np.testing.assert_array_equal(pos[e, d], landed_at[(e, d)])  # landed: it stays where it came down
+    assert len(landed_at) == 6  # every drone of both envs reached the cell
+    assert int(dr.lost.to_numpy().sum()) == 0 and int(dr.swaps.to_numpy().min()) >= 1
+    env.close()
