@@ -120,7 +120,8 @@ class PlannerConfig(Section):
                                   "original's defect (docs/model/agents.md §10.2; the thesis configs keep it)")
     greedy_resources: bool = True  # with a battery (drones.energy): the heuristic watches battery and tank
     greedy_energy_margin: float = num(0.25, 0.0, doc="resource-aware greedy: a drone flies home once its battery "
-                                                    "holds at most (1 + margin) x the energy of the flight home")
+                                                    "holds at most (1 + margin) x the energy of the flight home, "
+                                                    "plus the energy of waiting there for every other drone's turn")
     max_candidates: int = num(0, 0, 1 << 24,
                               doc="candidate list length K (groundstation included); 0 = every cell + 1")
     temperature: float = num(1.0, 0.0, 10.0, lo_open=True,

@@ -102,11 +102,12 @@ def test_the_resource_aware_greedy_swaps_batteries_and_loses_no_drone():
 
 @pytest.mark.slow
 def test_the_resource_aware_greedy_loses_no_drone_in_the_endurance_setting():
-    """configs/endurance.yaml as it is (4 drones flown by the collision FlyAgent, the scenario battery, whose full
-    charge flies home from any cell, a 4-drop tank), 4 envs for 200 s of their 357 s episodes. Before the greedy
-    landed the drones that wait at the groundstation (issue 33) they jostled each other off its cell, never stayed
-    the swap's 3 s there and came down beside it: 4 of these 16 drones (1.7 per episode over 32 whole episodes)."""
-    cfg = load_config(ROOT / "configs" / "endurance.yaml")
+    """configs/endurance.yaml (4 drones flown by the collision FlyAgent, the scenario battery, whose full charge
+    flies home from any cell) with the 4-drop tank it had then (the drones run dry and go home together), 4 envs for
+    200 s of their 357 s episodes. Before the greedy landed the drones that wait at the groundstation (issue 33) they
+    jostled each other off its cell, never stayed the swap's 3 s there and came down beside it: 4 of these 16 drones
+    (1.7 per episode over 32 whole episodes)."""
+    cfg = load_config(ROOT / "configs" / "endurance.yaml", ["drones.water_capacity=4"])  # the tank it was seen with
     env = PlannerVectorEnv(4, cfg, evaluation=True, controller="greedy", seed=7)
     env.reset(seed=7)
     actions = torch.zeros((4, 4), dtype=torch.long)
@@ -195,7 +196,7 @@ def test_planner_drones_sent_home_together_land_there_and_get_their_swap():
     dr = env.drones
     gs = dr.groundstation.to_numpy()[:, None, :]
     landed_at = {}
-    for step in range(150):
+    for _ in range(150):
         env.step(torch.zeros((2, 3), dtype=torch.long))  # candidate 0: the groundstation
         pos = dr.pos.to_numpy()
         on_base = (np.floor(pos / dr.cell).astype(int) == gs).all(-1)  # pos and the cell: (row, column)
