@@ -18,10 +18,16 @@ def _git(*args: str) -> str | None:
     return done.stdout.strip() if done.returncode == 0 else None
 
 
+# What decides a run: the code, the configs and the frozen models it loads. Results elsewhere in the checkout are
+# not code: an experiment that records into its committed journal (benchmarks/results/...) changes a tracked file
+# with every run, and called its own clean checkout dirty.
+CODE_PATHS = ("roshan", "configs", "models", "pyproject.toml")
+
+
 def code_version() -> dict:
     """``{"version", "commit", "dirty"}``: the installed package version, and the git commit of the checkout the
-    code runs from with whether tracked files differ from it (both ``None`` outside a git checkout, e.g. a wheel
-    installed into site-packages)."""
+    code runs from with whether tracked files of :data:`CODE_PATHS` differ from it (both ``None`` outside a git
+    checkout, e.g. a wheel installed into site-packages)."""
     try:
         version = metadata.version("roshan")
     except metadata.PackageNotFoundError:
@@ -31,7 +37,7 @@ def code_version() -> dict:
     # only the package's own checkout: site-packages inside some other repository must not borrow its commit
     if top is not None and Path(top).resolve() == SOURCE_ROOT:
         commit = _git("rev-parse", "HEAD")
-        status = _git("status", "--porcelain", "--untracked-files=no")
+        status = _git("status", "--porcelain", "--untracked-files=no", "--", *CODE_PATHS)
         dirty = None if status is None else bool(status)
     return {"version": version, "commit": commit, "dirty": dirty}
 
