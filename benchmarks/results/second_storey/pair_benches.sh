@@ -1,6 +1,7 @@
 #!/bin/bash
 # roshan bench fire (E = 1, 64; 3,000 updates) and roshan bench env (E = 1, 64; random actions), alternating the
-# previous code (9d2c47c, run from its own worktree with PYTHONPATH) and this code, 3 rounds; one JSON line per row.
+# previous code (a worktree at PREV_TREE, default /work/exp: 9d2c47c on 2026-12-04, c638f97 = 89bf684^ on
+# 2026-12-06 for benches_energy_2026-12-06.jsonl; run with PYTHONPATH) and this code, 3 rounds; one JSON line per row.
 PY=/work/main/.venv/bin/python
 for r in 1 2 3; do
   for side in prev new; do
