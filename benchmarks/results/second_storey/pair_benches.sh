@@ -5,7 +5,7 @@
 PY=/work/main/.venv/bin/python
 for r in 1 2 3; do
   for side in prev new; do
-    tree=/work/main; [ $side = prev ] && tree=/work/exp
+    tree=/work/main; [ $side = prev ] && tree=${PREV_TREE:-/work/exp}
     (cd /tmp && PYTHONPATH=$tree $PY -m roshan bench fire --envs 1,64 --steps 3000 --warmup 100 --no-big --json /tmp/bf_${side}_$r.json > /dev/null 2>&1)
     $PY -c "import json; d=json.load(open('/tmp/bf_${side}_$r.json')); [print(json.dumps({'bench': 'fire', 'round': $r, 'side': '$side', 'envs': x['envs'], 'fire_percentage': x['fire_percentage'], 'env_steps_per_s': round(x['env_steps_per_s'])})) for x in d['runs']]"
     (cd /tmp && PYTHONPATH=$tree $PY -m roshan bench env --envs 1,64 --drones 4 --fire 0.015,0.35 --policies random --min-env-steps 20000 --json /tmp/be_${side}_$r.json > /dev/null 2>&1)
