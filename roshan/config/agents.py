@@ -122,6 +122,7 @@ class PlannerConfig(Section):
     greedy_energy_margin: float = num(0.25, 0.0, doc="resource-aware greedy: a drone flies home once its battery "
                                                     "holds at most (1 + margin) x the energy of the flight home, "
                                                     "plus the energy of waiting there for every other drone's turn")
+    planner_resources: bool = False  # with a battery: planner drones go home on the aware greedy's rule by themselves
     max_candidates: int = num(0, 0, 1 << 24,
                               doc="candidate list length K (groundstation included); 0 = every cell + 1")
     temperature: float = num(1.0, 0.0, 10.0, lo_open=True,

@@ -77,6 +77,9 @@ class PlannerKernels(EpisodeKernels):
         greedy: the drones follow the heuristic state machine (docs/model/agents.md §10.2) instead of planner goals.
         greedy_home_fixed: the heuristic with the groundstation fix (:class:`GoalRules`, ``wake_reserved``).
         greedy_resources, energy_margin: with a battery, the resource-aware heuristic (:class:`GoalRules`).
+        planner_resources: with a battery, the planner's drones keep the same rule: a drone flies home on its own
+            once its battery or tank runs low, and the planner's goals for it count again once it is stocked;
+            choosing the groundstation for a drone short of either sends it home until stocked.
         move_explorers: step the explorers (evaluation); in planner training they stay at the groundstation.
         detected: the candidates are the fire map's cells (fires some drone has seen) instead of all burning
             cells (centralised training).
@@ -88,7 +91,7 @@ class PlannerKernels(EpisodeKernels):
     def __init__(self, fire: FireSim, drones: DroneSim, explorers: DroneSim, maps: ExploreMaps, *, interval: int,
                  t_max: int, coef, greedy: bool, greedy_home_fixed: bool, move_explorers: bool, detected: bool,
                  burnout: float, max_candidates: int, fly_frames: int, explore_frames: int,
-                 greedy_resources: bool = False, energy_margin: float = 0.25):
+                 greedy_resources: bool = False, energy_margin: float = 0.25, planner_resources: bool = False):
         super().__init__(fire, t_max)
         self.drones, self.explorers, self.maps = drones, explorers, maps
         self.interval, self.coef = interval, coef
@@ -111,7 +114,8 @@ class PlannerKernels(EpisodeKernels):
                                    wake_reserved=not greedy_home_fixed, sensor=maps, resources=greedy_resources,
                                    energy_margin=energy_margin, land=True)
         else:
-            self.rules = GoalRules(drones, BurningCells(fire), mode=DROP_ANYWHERE, sensor=maps, land=True)
+            self.rules = GoalRules(drones, BurningCells(fire), mode=DROP_ANYWHERE, sensor=maps, land=True,
+                                   resources=planner_resources, energy_margin=energy_margin)
         E, N = fire.num_envs, drones.num_drones
         self.finished = ti.field(ti.i32, E)  # greedy: ended inside this planner step, skip the rest of it
         self.objective = ti.field(ti.i32, E)  # a drone put out the last burning cell in this planner step
@@ -283,6 +287,11 @@ class PlannerKernels(EpisodeKernels):
         gs = dr.groundstation_centre(e)
         for d in range(dr.num_drones):
             k = ti.cast(actions[e, d], ti.i32)
+            if ti.static(self.rules.resources):
+                if dr.refilling[e, d] != 0:
+                    continue  # on its way home or waiting there: its goal stays until it is stocked
+                if (k < 1 or k >= self.cand_count[e]) and dr.is_stocked(e, d) == 0:
+                    dr.refilling[e, d] = 1  # sent home short of a full battery or tank: it stays until stocked
             if k >= 1 and k < self.cand_count[e]:
                 c = self.cand_cell[e, k]
                 dr.goal_cell[e, d] = c

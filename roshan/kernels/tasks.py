@@ -145,7 +145,8 @@ class GoalRules:
         resources: with a battery (``drones.energy``), the resource-aware heuristic: a drone flies home once its
             battery holds no more than (1 + ``energy_margin``) times what flying home takes plus what waiting there
             for every other drone's turn takes (:meth:`roshan.kernels.drones.DroneSim.base_queue_energy`), or its
-            tank is empty, waits there until both are full, and then takes the nearest free fire.
+            tank is empty, waits there until both are full, and then takes the nearest free fire (``DROP_ANYWHERE``:
+            it waits there for the planner's next goal).
         land: with a battery, a drone that waits at the groundstation lands on its cell (:meth:`is_landed`) instead
             of following the FlyAgent: the planner's level sets it for the planner and both heuristics alike.
     """
@@ -191,6 +192,8 @@ class GoalRules:
         dr = self.drones
         last = 0
         if ti.static(self.mode == DROP_ANYWHERE):
+            if ti.static(self.resources):
+                self.watch_resources(e, d)
             last = dr.extinguish_here(e, d)
         else:
             if ti.static(not self.sticky):
@@ -228,7 +231,8 @@ class GoalRules:
         if home != 0 and dr.is_stocked(e, d) != 0:  # a full battery and tank again: back to the fires
             dr.refilling[e, d] = 0
             home = 0
-            self.retarget(e, d)
+            if ti.static(self.mode != DROP_ANYWHERE):  # a planner drone waits there for its next goal
+                self.retarget(e, d)
         elif home == 0:
             need = (1.0 + self.energy_margin) * dr.energy_to_groundstation(e, d) + dr.queue_energy
             low = dr.energy[e, d] <= need

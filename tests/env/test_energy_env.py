@@ -120,12 +120,12 @@ def test_the_resource_aware_greedy_loses_no_drone_in_the_endurance_setting():
     env.close()
 
 
-def planner_env(energy: EnergyConfig, **rewards) -> PlannerVectorEnv:
+def planner_env(energy: EnergyConfig, resources: bool = False, **rewards) -> PlannerVectorEnv:
     """A planner-controlled env in training mode (explorers parked), 3 drones, a decision every low-level step;
-    ``rewards`` replace the whole reward (every other term 0)."""
+    ``resources``: planner.planner_resources; ``rewards`` replace the whole reward (every other term 0)."""
     zero = {k: 0.0 for k in ("goal", "burned", "ground", "timeout", "same", "extinguish", "fast", "lost")}
     cfg = Config(ignition=FIRES, drones=DroneConfig(num_drones=3, energy=energy), wind=WindConfig(speed=0.0))
-    pc = PlannerConfig(interval=1, fly_model=MODEL, explorer_model=MODEL, num_explorers=2,
+    pc = PlannerConfig(interval=1, fly_model=MODEL, explorer_model=MODEL, num_explorers=2, planner_resources=resources,
                        rewards=PlannerRewardConfig(**{**zero, **rewards}))
     return PlannerVectorEnv(2, cfg, pc, controller="planner", seed=4)
 
@@ -205,4 +205,30 @@ def test_planner_drones_sent_home_together_land_there_and_get_their_swap():
             np.testing.assert_array_equal(pos[e, d], landed_at[(e, d)])  # landed: it stays where it came down
     assert len(landed_at) == 6  # every drone of both envs reached the cell
     assert int(dr.lost.to_numpy().sum()) == 0 and int(dr.swaps.to_numpy().min()) >= 1
+    env.close()
+
+
+def test_planner_drones_with_the_resource_rule_go_home_by_themselves_and_stay_until_stocked():
+    """planner.planner_resources: a planner that only ever names the first listed fire loses no drone (with 4 kJ
+    batteries and no rule, all three drones of both envs come down within 400 steps), every drone that flies home
+    or waits there keeps the groundstation as its goal whatever the planner says, and choosing the groundstation for
+    a drained drone sends it home until it is stocked again."""
+    env = planner_env(EnergyConfig(preset="scenario", capacity=4000.0), resources=True)
+    env.reset(seed=4)
+    fire, home = torch.ones((2, 3), dtype=torch.long), torch.zeros((2, 3), dtype=torch.long)
+    dr = env.drones
+    for _ in range(12):  # out to the first listed fire: the batteries drain
+        env.step(fire)
+    env.step(home)
+    assert dr.refilling.to_numpy().all()  # drained: sent home until stocked
+    centre = dr.groundstation.to_numpy()[:, None, :] + 0.5
+    lost = 0.0
+    for _ in range(400):
+        _, _, terms, truncs, info = env.step(fire)
+        ended = terms | truncs
+        lost += float(info["episode_energy"]["drones_lost"][ended].sum())
+        waiting = dr.refilling.to_numpy() != 0
+        np.testing.assert_array_equal(dr.goal.to_numpy()[waiting], np.broadcast_to(centre, (2, 3, 2))[waiting])
+    assert lost == 0.0 and int(dr.lost.to_numpy().sum()) == 0
+    assert int(dr.swaps.to_numpy().min()) >= 1  # every drone went home and got a swap
     env.close()
