@@ -60,6 +60,14 @@ def test_the_presets_and_overrides():
         from_dict(DroneConfig, {"energy": {"preset": "forever"}})
 
 
+def test_the_realistic_preset_flies_the_skydrone_m50s_published_endurance():
+    """roshan/config/sim.py: 18S 62,000 mAh (66.6 V nominal), 60 min hovering empty, 25 min with the 50 kg payload."""
+    v = EnergyConfig(preset="realistic").values()
+    assert v["capacity"] == pytest.approx(66.6 * 62.0 * 3600.0, rel=1e-3)
+    assert v["capacity"] / v["hover_power"] / 60.0 == pytest.approx(60.0, rel=1e-3)
+    assert v["capacity"] / (v["hover_power"] + v["payload_power"]) / 60.0 == pytest.approx(25.0, rel=1e-3)
+
+
 def test_energy_drawn_over_a_known_flight_is_the_power_law_integrated():
     d = make()
     put(d, AWAY)
