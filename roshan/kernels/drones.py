@@ -340,7 +340,9 @@ class DroneSim:
     @ti.func
     def update_neighbours(self, e):
         """docs/model/agents.md §3.3: per drone, the nearest boundary and every other drone within half the view
-        range."""
+        range. With a battery, a drone on the groundstation cell is landed (it draws nothing there): on the ground, it
+        neither sees nor is seen by the others and collides with none (issue 33: three drones landed there kept a
+        fourth, which the collision FlyAgent steered around them, 8-13 m off the cell until its battery ran out)."""
         for i in range(self.num_drones):
             x = self.pos[e, i] / self.cell
             b = self.nearest_boundary(x)
@@ -354,7 +356,11 @@ class DroneSim:
             for j in range(self.num_drones):
                 if j != i:
                     dxy = self.pos[e, j] / self.cell - x
-                    if ti.abs(dxy[0]) < self.half_view and ti.abs(dxy[1]) < self.half_view:
+                    airborne = 1  # both in the air
+                    if ti.static(self.use_energy):
+                        on_ground = self.at_groundstation(e, i) + self.at_groundstation(e, j)
+                        airborne = ti.cast(on_ground == 0, ti.i32)
+                    if airborne != 0 and ti.abs(dxy[0]) < self.half_view and ti.abs(dxy[1]) < self.half_view:
                         vn = self.vel[e, j] / (self.v_max * self.s_norm)
                         self.neighbours[e, i, slot] = ti.Vector([dxy[0] / self.view, dxy[1] / self.view, vn[0], vn[1]])
                         self.neighbour_mask[e, i, slot] = 1

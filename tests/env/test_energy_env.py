@@ -232,3 +232,23 @@ def test_planner_drones_with_the_resource_rule_go_home_by_themselves_and_stay_un
     assert lost == 0.0 and int(dr.lost.to_numpy().sum()) == 0
     assert int(dr.swaps.to_numpy().min()) >= 1  # every drone went home and got a swap
     env.close()
+
+
+@pytest.mark.slow
+def test_drones_landed_at_the_groundstation_do_not_keep_another_off_it():
+    """configs/endurance.yaml's collision FlyAgent: the planner keeps drones 0-2 at the groundstation and sends drone 3
+    to the first listed fire. Drone 3 comes back on the return rule and gets its swap. Before landed drones left the
+    others' neighbour lists, it circled 8-13 m off the crowded cell until its battery ran out (every env, decisions
+    231-249)."""
+    cfg = load_config(ROOT / "configs" / "endurance.yaml")
+    env = PlannerVectorEnv(2, cfg, controller="planner", seed=7)
+    env.reset(seed=7)
+    actions = torch.zeros((2, 4), dtype=torch.long)
+    actions[:, 3] = 1
+    for _ in range(300):
+        _, _, terms, truncs, info = env.step(actions)
+        ended = terms | truncs
+        assert float(info["episode_energy"]["drones_lost"][ended].sum()) == 0.0
+    assert int(env.drones.lost.to_numpy().sum()) == 0
+    assert int(env.drones.swaps.to_numpy()[:, 3].min()) >= 1  # drone 3 came back and swapped in both envs
+    env.close()

@@ -64,6 +64,9 @@ def test_reset_mask_resets_only_the_chosen_envs():
     assert sim.episode.to_numpy().tolist() == [0, 1, 0]
 
 
+VARIANTS = [("dense", "envs"), ("sparse", "envs"), ("dense", "chunks"), ("sparse", "chunks")]
+
+# One process per thread count runs every variant (Taichi fixes the thread count at init) and prints a digest each.
 SCRIPT = textwrap.dedent("""
     import hashlib, sys
     import numpy as np
@@ -73,23 +76,40 @@ SCRIPT = textwrap.dedent("""
     from roshan.kernels.fire import FireSim
     from roshan.kernels.fire_parallel import ChunkedStep
     from roshan.maps import load_map
-    sim = FireSim(load_map("21x21_Field"), FireConfig(layout=sys.argv[2], parallel=sys.argv[3]),
-                  ignition=IgnitionConfig(fire_percentage=0.2), num_envs=16, seed=3)
-    if sim.parallel == "chunks":
-        sim.chunked = ChunkedStep(sim, min_chunk=8)  # many chunks on this small map
-    sim.reset(); sim.step(2000)
-    ints, timers = sim.cell_records()
-    h = hashlib.sha256(ints.tobytes() + timers.tobytes() + sim.conv.to_numpy().tobytes()
-                       + sim.rad.to_numpy().tobytes())
-    print(h.hexdigest())
+    for variant in sys.argv[2:]:
+        layout, parallel = variant.split(",")
+        sim = FireSim(load_map("21x21_Field"), FireConfig(layout=layout, parallel=parallel),
+                      ignition=IgnitionConfig(fire_percentage=0.2), num_envs=16, seed=3)
+        if sim.parallel == "chunks":
+            sim.chunked = ChunkedStep(sim, min_chunk=8)  # many chunks on this small map
+        sim.reset(); sim.step(2000)
+        ints, timers = sim.cell_records()
+        h = hashlib.sha256(ints.tobytes() + timers.tobytes() + sim.conv.to_numpy().tobytes()
+                           + sim.rad.to_numpy().tobytes())
+        print(variant, h.hexdigest())
 """)
 
 
-@pytest.mark.parametrize("layout,parallel", [("dense", "envs"), ("sparse", "envs"), ("dense", "chunks"),
-                                             ("sparse", "chunks")])
+@pytest.fixture(scope="module")
+def digests_by_threads() -> dict[tuple[str, str], list[str]]:
+    """(layout, parallel) -> [digest at 1 thread, digest at 2 threads]; the two processes run at once."""
+    args = [",".join(v) for v in VARIANTS]
+    procs = [subprocess.Popen([sys.executable, "-c", SCRIPT, str(t), *args], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for t in (1, 2)]
+    out: dict[tuple[str, str], list[str]] = {v: [] for v in VARIANTS}
+    for proc in procs:
+        stdout, stderr = proc.communicate()
+        assert proc.returncode == 0, stderr
+        for line in stdout.splitlines():
+            if line.count(",") == 1 and " " in line:
+                variant, digest = line.split()
+                out[tuple(variant.split(","))].append(digest)
+    return out
+
+
+@pytest.mark.parametrize("layout,parallel", VARIANTS)
 @pytest.mark.slow
-def test_bit_identical_across_thread_counts(layout, parallel):
-    digests = [subprocess.run([sys.executable, "-c", SCRIPT, str(t), layout, parallel], capture_output=True,
-                              text=True, check=True).stdout.strip().splitlines()[-1] for t in (1, 2)]
-    assert digests[0] == digests[1]
+def test_bit_identical_across_thread_counts(layout, parallel, digests_by_threads):
+    digests = digests_by_threads[(layout, parallel)]
+    assert len(digests) == 2 and digests[0] == digests[1]
     assert len(digests[0]) == len(hashlib.sha256().hexdigest())
