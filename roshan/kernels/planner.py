@@ -316,6 +316,8 @@ class PlannerKernels(EpisodeKernels):
             skip = 0
             if ti.static(self.coef.newest):
                 skip = ground  # the newest code lets several drones wait at the groundstation
+            if ti.static(self.rules.resources):
+                skip = ti.max(skip, dr.refilling[e, d])  # flying home to restock: no fire shared with anyone
             if skip == 0:
                 for j in range(d):  # a duplicate if an earlier drone has the same goal
                     if dr.goal_cell[e, j] == dr.goal_cell[e, d]:

@@ -252,3 +252,18 @@ def test_drones_landed_at_the_groundstation_do_not_keep_another_off_it():
     assert int(env.drones.lost.to_numpy().sum()) == 0
     assert int(env.drones.swaps.to_numpy()[:, 3].min()) >= 1  # drone 3 came back and swapped in both envs
     env.close()
+
+
+def test_drones_restocking_under_the_return_rule_share_no_goal():
+    """SameGoalPenalty counts drones with one goal; with planner.planner_resources, drones that fly home to restock
+    (sent by the planner or by the rule) have no fire to share: three drones sent home together cost nothing, where
+    the thesis's count (no rule) charges two duplicates for every decision of it."""
+    for resources, per_decision in ((True, 0.0), (False, -2.0)):
+        env = planner_env(EnergyConfig(preset="scenario"), resources=resources, same=-1.0)
+        env.reset(seed=4)
+        for _ in range(12):  # out to the first listed fire: the batteries drain
+            env.step(torch.ones((2, 3), dtype=torch.long))
+        for _ in range(5):
+            _, rewards, *_ = env.step(torch.zeros((2, 3), dtype=torch.long))
+            torch.testing.assert_close(rewards, torch.full((2,), per_decision))
+        env.close()
