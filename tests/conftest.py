@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 import torch
 
+from roshan.runtime import init_taichi, reset_taichi
+
 # One torch thread, here and in the subprocesses tests start. The tests' batches are tiny (a few drones), so a second
 # thread gains nothing, and torch's OpenMP threads spin after each op on the cores Taichi's kernels need next: with
 # two torch threads, a step of the endurance planner env (4 envs, collision fliers) took 475 ms beside two training
 # runs, against 7.7 ms with one.
 torch.set_num_threads(1)
 os.environ.setdefault("OMP_NUM_THREADS", "1")
-
-from roshan.runtime import init_taichi, reset_taichi
 
 
 @pytest.fixture(scope="module", autouse=True)
