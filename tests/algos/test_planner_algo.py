@@ -89,7 +89,7 @@ def test_thesis_net_masks_padding_and_the_groundstation_while_a_fire_is_listed()
 def reference_attention(net: ThesisPlannerNet, obs: dict):
     """The thesis net's attention as nn.MultiheadAttention computes it on the embedded fires (the H-wide
     projections that ``attend`` avoids)."""
-    allowed = net.allowed(obs["fires_mask"])
+    allowed = net.allowed(obs).squeeze(1)  # one mask for all drones without a battery
     query = net.pos_emb(obs["drones"]) + net.goal_emb(obs["goals"]) + net.id_emb(net.drone_ids)
     fires = net.fire_emb(obs["fires"])
     out, weights = net.attn(query, fires, fires, key_padding_mask=~allowed, need_weights=True,
@@ -299,6 +299,13 @@ def test_with_a_battery_the_nets_read_energy_and_may_send_a_drone_home_while_fir
     assert bool(torch.isfinite(aware.evaluate(obs, actions)[0]).all())  # the groundstation is a candidate
     if net_cls is ThesisPlannerNet:
         assert bool((plain.probs(obs)[..., 0] == 0).all()) and bool((aware.probs(obs)[..., 0] > 0).all())
+        # a stocked drone (full battery and tank) is not offered the groundstation while fires burn
+        stocked = {**obs, "energy": obs["energy"].clone(), "water": obs["water"].clone()}
+        stocked["energy"][:, 1, 0] = 1.0
+        stocked["water"][:, 1] = 1.0
+        probs = aware.probs(stocked)
+        assert bool((probs[:, 1, 0] == 0).all()) and bool((probs[:, [0, 2], 0] > 0).all())
+        assert bool((probs[:, 1, 1:].sum(-1) > 0.99).all())
     drained = {**obs, "energy": torch.zeros_like(obs["energy"])}
     assert not torch.allclose(aware.evaluate(obs, actions)[0], aware.evaluate(drained, actions)[0])
     assert not torch.allclose(aware.value(obs), aware.value(drained))
