@@ -83,6 +83,9 @@ def init_weights(module: nn.Module) -> None:
 # ---------------------------------------------------------------------------------------------- thesis-era net
 
 
+RESTOCK_BELOW = 0.5  # with a battery: the fill of battery or tank below which the thesis net may send a drone home
+
+
 class ThesisPlannerNet(nn.Module):
     """Thesis-era planner (docs/model/learning.md §3.1): one attention layer from drones to fire candidates whose
     head-averaged weights are the per-drone categorical probabilities; the value is the mean over drones of a linear
@@ -95,10 +98,12 @@ class ThesisPlannerNet(nn.Module):
     reference).
 
     With ``resources`` (drones with a battery, issue 33) the drone queries also embed the tank's fill and the
-    ``energy`` pair, and the groundstation is a candidate of its own for each drone that lacks charge or water:
-    sending it home to swap its battery or refill is a decision. A stocked drone gets it only when no fire is
-    listed, as without a battery: going home restocks nothing, and the planner used it to park drones at the base
-    (~150 s an episode against greedy's 18 s).
+    ``energy`` pair, and the groundstation is a candidate of its own for each drone whose battery or tank is below
+    half (:data:`RESTOCK_BELOW`): sending it home to swap its battery or refill is a decision. Other drones get it
+    only when no fire is listed, as without a battery. Offered always, the planner parked stocked drones at the
+    base (~150 s an episode against greedy's 18 s); offered for any shortfall, it sent drones home after nearly
+    every drop (a third of their decisions spent restocking), which also dodged the same-goal penalty. The return
+    rule (planner.planner_resources) brings a drone home before its battery or tank runs out in any case.
     """
 
     def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS,
@@ -120,13 +125,13 @@ class ThesisPlannerNet(nn.Module):
 
     def allowed(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         """(B, 1, K) bool, the same for every drone: valid fires, or only the groundstation when no fire is valid;
-        with resources (B, N, K): the groundstation also for each drone short of a full battery or tank."""
+        with resources (B, N, K): the groundstation also for each drone whose battery or tank is below half."""
         allowed = obs["fires_mask"] > 0
         no_fire = ~allowed[:, 1:].any(-1)
         allowed[:, 0] = no_fire
         allowed = allowed.unsqueeze(1)
         if self.resources:
-            restock = (obs["energy"][..., 0] < 1.0) | (obs["water"][..., 0] < 1.0)  # (B, N)
+            restock = (obs["energy"][..., 0] < RESTOCK_BELOW) | (obs["water"][..., 0] < RESTOCK_BELOW)  # (B, N)
             allowed = allowed.repeat(1, restock.shape[1], 1)
             allowed[..., 0] = restock | no_fire[:, None]
         return allowed

@@ -292,20 +292,20 @@ def test_with_a_battery_the_nets_read_energy_and_may_send_a_drone_home_while_fir
     torch.manual_seed(0)
     g = torch.Generator().manual_seed(5)
     obs = random_obs(6, 3, 9, g, n_valid=torch.full((6,), 9))  # fires listed in every row
-    obs["energy"] = torch.rand(6, 3, 2, generator=g)
+    obs["energy"] = torch.rand(6, 3, 2, generator=g) * 0.45  # every battery below half: home is a candidate
     plain, aware = net_cls(3), net_cls(3, resources=True)
     assert not any("energy" in k for k in plain.state_dict())  # without a battery: the nets as before
     actions = torch.zeros((6, 3), dtype=torch.long)  # everyone home
     assert bool(torch.isfinite(aware.evaluate(obs, actions)[0]).all())  # the groundstation is a candidate
     if net_cls is ThesisPlannerNet:
         assert bool((plain.probs(obs)[..., 0] == 0).all()) and bool((aware.probs(obs)[..., 0] > 0).all())
-        # a stocked drone (full battery and tank) is not offered the groundstation while fires burn
-        stocked = {**obs, "energy": obs["energy"].clone(), "water": obs["water"].clone()}
-        stocked["energy"][:, 1, 0] = 1.0
-        stocked["water"][:, 1] = 1.0
-        probs = aware.probs(stocked)
-        assert bool((probs[:, 1, 0] == 0).all()) and bool((probs[:, [0, 2], 0] > 0).all())
-        assert bool((probs[:, 1, 1:].sum(-1) > 0.99).all())
+        # home is offered while fires burn only to a drone whose battery or tank is below half
+        fills = {**obs, "energy": obs["energy"].clone(), "water": obs["water"].clone()}
+        fills["energy"][..., 0] = torch.tensor([0.5, 0.49, 0.9])
+        fills["water"][..., 0] = torch.tensor([0.5, 0.9, 0.2])
+        probs = aware.probs(fills)
+        assert bool((probs[:, 0, 0] == 0).all()) and bool((probs[:, 1:, 0] > 0).all())
+        assert bool((probs[:, 0, 1:].sum(-1) > 0.99).all())
     drained = {**obs, "energy": torch.zeros_like(obs["energy"])}
     assert not torch.allclose(aware.evaluate(obs, actions)[0], aware.evaluate(drained, actions)[0])
     assert not torch.allclose(aware.value(obs), aware.value(drained))
