@@ -29,7 +29,9 @@ class Level:
 
 FLY_AGENT = Level("FlyAgent", flies=True, shape_keys=("fly.collision", "fly.frames"),
                   section_shape_keys=("share_encoder",), frozen_models=())
-PLANNER = Level("planner", flies=False, shape_keys=("planner.network", "drones.num_drones", "drones.energy.preset"),
+# drones.energy.enabled (a property of the section): with a battery the observation has an energy part, whatever
+# the preset (the charge is a fraction of a full battery), so a planner trained on `scenario` serves `realistic`.
+PLANNER = Level("planner", flies=False, shape_keys=("planner.network", "drones.num_drones", "drones.energy.enabled"),
                 section_shape_keys=(),
                 frozen_models=("planner.fly_model", "planner.explorer_model"))
 
