@@ -26,7 +26,8 @@ class TrainConfig(Section):
     eval_video_frames: int = num(30, 0, doc="periodic evaluation: frames of env 0's first episode logged to "
                                             "TensorBoard as a video (every k-th step, to fit); 0 = no video")
     auto_train: int = num(1, 1, doc="independent runs (seeds seed, seed+1, ...) in sequence, then evaluation")
-    torch_threads: int = num(0, 0, doc="torch intra-op threads; 0 = torch's default")
+    torch_threads: int = num(0, 0, doc="torch intra-op threads; 0 = torch's default in training, 1 in roshan eval and "
+                                       "roshan watch (small batches between Taichi kernels)")
     buffer_path: str = ""  # IQL: the replay buffer to learn from (``roshan eval --save-buffer``)
     init_from: str = ""  # start from these network weights (a run folder's best or a checkpoint): fine-tuning
 

@@ -33,7 +33,7 @@ from roshan.runs.report.plots import plot_comparison, plot_episodes, plot_learni
 from roshan.runs.report.scalars import read_tensorboard_scalars
 from roshan.runs.report.stats import summarize
 from roshan.runs.report.tables import format_table
-from roshan.runtime import current_arch, ensure_taichi, torch_device
+from roshan.runtime import current_arch, ensure_taichi, torch_device, use_acting_threads
 
 
 @torch.no_grad()
@@ -356,6 +356,7 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
     trained, agent, path = load_agent(target, which, torch_device())
     cfg = apply_overrides(trained, overrides) if overrides else trained
     check_setting(trained, cfg, path)
+    use_acting_threads(cfg.train.torch_threads)
     run_dir = path.parent.parent if path.parent.name == "checkpoints" else path.parent
     E = max(1, min(num_envs or cfg.train.eval_envs, episodes))
     arch = current_arch() or "cpu"

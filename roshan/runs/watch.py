@@ -19,7 +19,7 @@ from roshan.config import apply_overrides
 from roshan.ggui import open_shown_window
 from roshan.io import prepare_output, refuse_overwrite, write_gif, writing
 from roshan.runs.envs import caption_name, make_env
-from roshan.runtime import ensure_taichi, torch_device
+from roshan.runtime import ensure_taichi, torch_device, use_acting_threads
 
 
 def has_display() -> bool:
@@ -55,6 +55,7 @@ def watch(target: str | Path, steps: int | None = None, seed: int = 0, which: st
     trained, agent, path = load_agent(target, which, torch_device())
     cfg = apply_overrides(trained, overrides) if overrides else trained
     check_setting(trained, cfg, path)
+    use_acting_threads(cfg.train.torch_threads)
     run_dir = path.parent.parent if path.parent.name == "checkpoints" else path.parent
     env = make_env(cfg, 1, seed, evaluation=True, render_mode="rgb_array")  # it keeps each episode's final frame
     env.caption_name = caption_name(env.default_caption_name, run_dir)
