@@ -353,13 +353,15 @@ class DroneSim:
                 self.neighbours[e, i, 0] = ti.Vector([0.0, 0.0, 0.0, 0.0])
                 self.neighbour_mask[e, i, 0] = 0
             slot = 1
+            i_landed = 0
+            if ti.static(self.use_energy):
+                i_landed = self.at_groundstation(e, i)
             for j in range(self.num_drones):
                 if j != i:
                     dxy = self.pos[e, j] / self.cell - x
                     airborne = 1  # both in the air
                     if ti.static(self.use_energy):
-                        on_ground = self.at_groundstation(e, i) + self.at_groundstation(e, j)
-                        airborne = ti.cast(on_ground == 0, ti.i32)
+                        airborne = ti.cast(i_landed + self.at_groundstation(e, j) == 0, ti.i32)
                     if airborne != 0 and ti.abs(dxy[0]) < self.half_view and ti.abs(dxy[1]) < self.half_view:
                         vn = self.vel[e, j] / (self.v_max * self.s_norm)
                         self.neighbours[e, i, slot] = ti.Vector([dxy[0] / self.view, dxy[1] / self.view, vn[0], vn[1]])
