@@ -247,6 +247,12 @@ def run_worker(spec: Spec, storage_url: str, root: str | Path, execute: Execute 
         trial.set_user_attr("duplicate", True)
         study.tell(trial, state=TrialState.FAIL)
         return 0
+    carried = study._storage.get_trial(trial._trial_id).user_attrs.get(RESULT_ATTR)
+    if carried is not None:
+        # The retry of a run that finished: its result was stored, then its trial was failed as stale before the
+        # tell (the worker cut off in between). Running it again would only repeat it.
+        record_result(study, trial, carried)
+        return 0
     run = runs[key]
     folder = run_dir(root, spec.name, run)
     rerun_of = study._storage.get_trial(trial._trial_id).user_attrs.get(RERUN_ATTR)

@@ -397,6 +397,32 @@ def test_a_run_failed_as_stale_while_it_worked_records_its_result_on_its_retry(t
     assert progress(study) == {"done": 1, "running": 0, "waiting": 5, "failed": 0}  # the retry did it
 
 
+
+def test_a_retry_that_carries_its_runs_result_is_completed_not_run_again(tmp_path):
+    """The worker stored the result and was cut off before the tell; the next runner failed the trial as stale and
+    queued a retry, which carries the result (a 90-minute E7 seed was about to be trained again this way)."""
+    from optuna.trial import TrialState
+
+    from roshan.study.storage import RetryStaleTrial, experimental
+
+    spec, url, study = start(write_spec(tmp_path), tmp_path)
+    log = tmp_path / "log"
+    first = [t for t in study.get_trials(deepcopy=False) if t.user_attrs.get("run") == "fast/seed_0"][0]
+    study._storage.set_trial_state_values(first._trial_id, state=TrialState.RUNNING)
+    result = {**fake_result(spec.runs(("fast",))[0]), "success_rate": 0.75}
+    study._storage.set_trial_user_attr(first._trial_id, "result", result)
+    study._storage.set_trial_state_values(first._trial_id, state=TrialState.FAIL)
+    with experimental():
+        RetryStaleTrial(max_retry=3)(study, study._storage.get_trial(first._trial_id))
+
+    assert run_worker(spec, url, tmp_path, execute=recording_execute(log), only=("fast",)) == 0
+    assert not log.exists()  # nothing was trained or evaluated
+    retry = [t for t in study.get_trials(deepcopy=False)
+             if t.user_attrs.get("run") == "fast/seed_0" and t.state == TrialState.COMPLETE]
+    assert len(retry) == 1 and retry[0].value == 0.75 and retry[0].user_attrs["result"] == result
+    assert progress(study)["done"] == 1
+
+
 # ------------------------------------------------------------------------------------------ the report
 
 
