@@ -17,10 +17,11 @@ def fly_ppo(cfg: PPOConfig, collision: bool, frames: int = 3, device: str | torc
 
 
 def planner_ppo(cfg: PPOConfig, network: str, num_drones: int, device: str | torch.device = "cpu",
-                rnd: RNDConfig | None = None, temperature: float = 1.0, resources: bool = False) -> PPO:
-    """PPO over a planner network (``planner.network``, ``planner.temperature``); ``resources``: the drones
-    have a battery (``drones.energy``), which the network reads."""
-    return PPO(cfg, PlannerPolicy(network, num_drones, temperature, resources), device, rnd)
+                rnd: RNDConfig | None = None, temperature: float = 1.0, resources: bool = False,
+                distance_prior: float = 0.0) -> PPO:
+    """PPO over a planner network (``planner.network``, ``planner.temperature``, ``planner.distance_prior``);
+    ``resources``: the drones have a battery (``drones.energy``), which the network reads."""
+    return PPO(cfg, PlannerPolicy(network, num_drones, temperature, resources, distance_prior), device, rnd)
 
 
 def make_agent(cfg: Config, device: str | torch.device = "cpu") -> Agent:
@@ -31,7 +32,8 @@ def make_agent(cfg: Config, device: str | torch.device = "cpu") -> Agent:
 AGENTS = {
     "ppo": lambda cfg, device: fly_ppo(cfg.ppo, cfg.fly.collision, cfg.fly.frames, device, cfg.rnd),
     "planner": lambda cfg, device: planner_ppo(cfg.ppo, cfg.planner.network, cfg.drones.num_drones, device, cfg.rnd,
-                                               cfg.planner.temperature, cfg.drones.energy.enabled),
+                                               cfg.planner.temperature, cfg.drones.energy.enabled,
+                                               cfg.planner.distance_prior),
     "td3": lambda cfg, device: TD3(cfg.td3, cfg.fly.collision, cfg.fly.frames, device),
     "iql": lambda cfg, device: IQL(cfg.iql, cfg.fly.collision, cfg.fly.frames, device),
 }

@@ -83,6 +83,27 @@ def init_weights(module: nn.Module) -> None:
 # ---------------------------------------------------------------------------------------------- thesis-era net
 
 
+class DistancePrior(nn.Module):
+    """-w |f_j - p_i| (B, N, K) for drone i and candidate j in normalised map units, with w > 0 learned from ``weight``
+    (``planner.distance_prior``; beyond the thesis). The thesis net's score of a candidate is linear in its position
+    (:meth:`ThesisPlannerNet.attend`), so its argmax is always a corner of the candidates' hull: "the nearest fire",
+    the greedy heuristic's choice, is not one it can express. With the prior it is the starting point."""
+
+    def __init__(self, weight: float):
+        super().__init__()
+        self.log_weight = nn.Parameter(torch.tensor([math.log(weight)]))
+
+    def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        gap = obs["fires"].unsqueeze(1) - obs["drones"].unsqueeze(2)  # (B, N, K, 2)
+        return -self.log_weight.exp() * (gap.pow(2).sum(-1) + 1e-12).sqrt()
+
+
+def make_distance_prior(weight: float) -> DistancePrior | None:
+    """The prior for ``planner.distance_prior`` (made after a net's own layers, so their initial draws stay the
+    same), or None when it is 0."""
+    return DistancePrior(weight) if weight > 0 else None
+
+
 RESTOCK_BELOW = 0.5  # with a battery: the fill of battery or tank below which the thesis net may send a drone home
 
 
@@ -107,7 +128,7 @@ class ThesisPlannerNet(nn.Module):
     """
 
     def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS,
-                 temperature: float = 1.0, resources: bool = False):
+                 temperature: float = 1.0, resources: bool = False, distance_prior: float = 0.0):
         super().__init__()
         self.pos_emb = nn.Linear(2, hidden)
         self.goal_emb = nn.Linear(2, hidden)
@@ -122,6 +143,7 @@ class ThesisPlannerNet(nn.Module):
         layer_init(self.value_head, gain=1.0)
         self.register_buffer("drone_ids", torch.arange(num_drones), persistent=False)
         self.temperature = temperature  # planner.temperature: logits / T, so p ~ weights^(1/T)
+        self.prior = make_distance_prior(distance_prior)
 
     def allowed(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         """(B, 1, K) bool, the same for every drone: valid fires, or only the groundstation when no fire is valid;
@@ -180,7 +202,10 @@ class ThesisPlannerNet(nn.Module):
         """Per-drone logits (B, N, K) (-inf where masked) and the value (B,)."""
         weights, out, allowed = self.attend(obs)
         # the clamp keeps the log finite where a weight underflows; log_softmax renormalises after it
-        logits = (weights.clamp_min(PROB_EPS).log() / self.temperature).masked_fill(~allowed, float("-inf"))
+        logits = weights.clamp_min(PROB_EPS).log()
+        if self.prior is not None:
+            logits = logits + self.prior(obs)
+        logits = (logits / self.temperature).masked_fill(~allowed, float("-inf"))
         return logits, self.value_head(out).squeeze(-1).mean(-1)
 
     def forward_act(self, obs: dict[str, torch.Tensor], deterministic: bool = False,
@@ -258,7 +283,7 @@ class PointerPlannerNet(nn.Module):
     repeats) and an attention-pooled critic on the shared encoder."""
 
     def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS,
-                 temperature: float = 1.0, resources: bool = False):
+                 temperature: float = 1.0, resources: bool = False, distance_prior: float = 0.0):
         super().__init__()
         self.encoder = PlannerEncoder(num_drones, hidden, heads, resources)
         self.query_proj = nn.Linear(hidden, hidden)
@@ -271,12 +296,14 @@ class PointerPlannerNet(nn.Module):
         self.value_head = nn.Sequential(nn.Linear(hidden, 2 * hidden), nn.ReLU(), nn.Linear(2 * hidden, 1))
         init_weights(self)
         layer_init(self.value_head[-1], gain=1.0)
+        self.prior = make_distance_prior(distance_prior)
 
-    def base_logits(self, d: torch.Tensor, fires: torch.Tensor) -> torch.Tensor:
-        """(Wq d_i) . (Wk f_j) / (sqrt(H) T), shape (B, N, K)."""
+    def base_logits(self, d: torch.Tensor, fires: torch.Tensor, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        """(Wq d_i) . (Wk f_j) / (sqrt(H) T), shape (B, N, K); with the distance prior, plus its term / T."""
         temperature = self.log_temperature.clamp(-3.0, 3.0).exp()
         scale = math.sqrt(d.shape[-1]) * temperature * self.temperature
-        return torch.bmm(self.query_proj(d), self.key_proj(fires).transpose(1, 2)) / scale
+        base = torch.bmm(self.query_proj(d), self.key_proj(fires).transpose(1, 2)) / scale
+        return base if self.prior is None else base + self.prior(obs) / self.temperature
 
     def penalty(self) -> torch.Tensor:
         return self.log_penalty.clamp(-3.0, 3.0).exp()
@@ -305,7 +332,7 @@ class PointerPlannerNet(nn.Module):
                     generator: torch.Generator | None = None):
         """Actions (B, N), joint log-prob (B,), entropy (B,) and value (B,), decoding drones in id order."""
         d, fires, valid = self.encoder(obs)
-        base = self.base_logits(d, fires)
+        base = self.base_logits(d, fires, obs)
         B, N, K = base.shape
         c = self.penalty()
         counts = base.new_zeros(B, K)
@@ -325,7 +352,7 @@ class PointerPlannerNet(nn.Module):
     def evaluate(self, obs: dict[str, torch.Tensor], actions: torch.Tensor):
         """Joint log-prob (B,), entropy (B,) and value (B,) of given actions (B, N), teacher-forced."""
         d, fires, valid = self.encoder(obs)
-        logits = self.decode_logits(self.base_logits(d, fires), valid, actions)
+        logits = self.decode_logits(self.base_logits(d, fires, obs), valid, actions)
         return (*score(logits, actions), self.critic(d))
 
     def value(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:

@@ -169,8 +169,10 @@ class PlannerPolicy:
     # both planner critics read the actor's encoder (thesis Table 5.8, docs/model/learning.md §3.2)
     shares_encoder = True
 
-    def __init__(self, network: str, num_drones: int, temperature: float = 1.0, resources: bool = False):
-        self.net = PLANNER_NETS[network](num_drones, temperature=temperature, resources=resources)
+    def __init__(self, network: str, num_drones: int, temperature: float = 1.0, resources: bool = False,
+                 distance_prior: float = 0.0):
+        self.net = PLANNER_NETS[network](num_drones, temperature=temperature, resources=resources,
+                                         distance_prior=distance_prior)
         self.novelty_dim = (7 if resources else 5) * num_drones + 5
 
     @staticmethod

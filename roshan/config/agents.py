@@ -128,6 +128,10 @@ class PlannerConfig(Section):
     temperature: float = num(1.0, 0.0, 10.0, lo_open=True,
                              doc="the planner's categorical is p^(1/T), renormalised (logits / T): T < 1 sharpens "
                                  "the sampled goals so training episodes can end in success; argmax is unchanged")
+    distance_prior: float = num(0.0, 0.0, 1000.0,
+                                doc="beyond the thesis: w0 > 0 adds -w |fire - drone| (normalised map units) to each "
+                                    "drone's logits, w learned from w0 (a closer fire likelier); 0 = off, the "
+                                    "networks as they were")
     network: str = choice("thesis", ("thesis", "pointer"),
                           doc="the planner network: docs/model/learning.md §3.1 (thesis) or §3.2 (pointer, newest)")
     rewards: PlannerRewardConfig = field(default_factory=PlannerRewardConfig)

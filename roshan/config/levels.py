@@ -31,7 +31,8 @@ FLY_AGENT = Level("FlyAgent", flies=True, shape_keys=("fly.collision", "fly.fram
                   section_shape_keys=("share_encoder",), frozen_models=())
 # drones.energy.enabled (a property of the section): with a battery the observation has an energy part, whatever
 # the preset (the charge is a fraction of a full battery), so a planner trained on `scenario` serves `realistic`.
-PLANNER = Level("planner", flies=False, shape_keys=("planner.network", "drones.num_drones", "drones.energy.enabled"),
+PLANNER = Level("planner", flies=False, shape_keys=("planner.network", "drones.num_drones", "drones.energy.enabled",
+                                                "planner.distance_prior"),
                 section_shape_keys=(),
                 frozen_models=("planner.fly_model", "planner.explorer_model"))
 

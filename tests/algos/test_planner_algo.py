@@ -149,7 +149,7 @@ def test_pointer_net_never_samples_a_masked_candidate_or_a_taken_fire():
     obs = random_obs(32, N, K, g)
     d, fires, valid = net.encoder(obs)
     actions = net.forward_act(obs, generator=g)[0]
-    probs = torch.softmax(net.decode_logits(net.base_logits(d, fires), valid, actions), -1)
+    probs = torch.softmax(net.decode_logits(net.base_logits(d, fires, obs), valid, actions), -1)
     assert bool((probs[~valid.unsqueeze(1).expand_as(probs)] == 0).all())
     taken = probs[:, 1].gather(-1, actions[:, :1])  # drone 1 cannot take drone 0's fire
     assert bool((taken[actions[:, 0] > 0] == 0).all())
@@ -162,7 +162,7 @@ def test_pointer_groundstation_may_repeat():
     net = PointerPlannerNet(3)
     obs = random_obs(256, 3, 5, g, n_valid=torch.full((256,), 5))  # 4 fires for 3 drones: no forced fallback
     d, fires, valid = net.encoder(obs)
-    base = net.base_logits(d, fires)
+    base = net.base_logits(d, fires, obs)
     home = torch.zeros(256, 3, dtype=torch.long)  # every drone at the groundstation
     logits = net.decode_logits(base, valid, home)
     # drone i's groundstation logit carries the soft penalty c * (number of earlier drones there), no mask
@@ -309,3 +309,49 @@ def test_with_a_battery_the_nets_read_energy_and_may_send_a_drone_home_while_fir
     drained = {**obs, "energy": torch.zeros_like(obs["energy"])}
     assert not torch.allclose(aware.evaluate(obs, actions)[0], aware.evaluate(drained, actions)[0])
     assert not torch.allclose(aware.value(obs), aware.value(drained))
+
+
+def nearest_valid(obs: dict, taken: torch.Tensor | None = None, home: bool = False) -> torch.Tensor:
+    """(B, N) index of each drone's nearest listed fire (index >= 1; with ``home`` the groundstation, index 0, too),
+    by hand; ``taken`` (B, K) bool excluded."""
+    dist = (obs["fires"].unsqueeze(1) - obs["drones"].unsqueeze(2)).norm(dim=-1)  # (B, N, K)
+    out = obs["fires_mask"] == 0
+    out[:, 0] = not home
+    if taken is not None:
+        out = out | taken
+    return dist.masked_fill(out.unsqueeze(1), float("inf")).argmin(-1)
+
+
+@torch.no_grad()
+def test_a_strong_distance_prior_makes_each_drone_choose_its_nearest_fire():
+    """planner.distance_prior: the thesis net's argmax becomes greedy's nearest fire; the pointer net's, drone by
+    drone in id order, the nearest candidate no earlier drone took. Off (0) the nets have no extra parameter."""
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(3)
+    N, K = 3, 12
+    obs = random_obs(64, N, K, g, n_valid=torch.randint(N + 2, K + 1, (64,), generator=g))
+    thesis = ThesisPlannerNet(N, distance_prior=1000.0)
+    assert bool((thesis.forward_act(obs, deterministic=True)[0] == nearest_valid(obs)).all())
+    assert not bool((ThesisPlannerNet(N).forward_act(obs, deterministic=True)[0] == nearest_valid(obs)).all())
+
+    pointer = PointerPlannerNet(N, distance_prior=1000.0)  # its groundstation is always a candidate, and repeats
+    actions = pointer.forward_act(obs, deterministic=True)[0]
+    taken = torch.zeros(64, K, dtype=torch.bool)
+    for i in range(N):
+        assert bool((actions[:, i] == nearest_valid(obs, taken, home=True)[:, i]).all()), f"drone {i}"
+        taken.scatter_(1, actions[:, i:i + 1], actions[:, i:i + 1] > 0)
+
+    for net in (ThesisPlannerNet(N), PointerPlannerNet(N)):
+        assert net.prior is None and not any("prior" in k for k in net.state_dict())
+
+
+def test_the_distance_priors_weight_is_learned_by_the_actors_optimiser():
+    g = torch.Generator().manual_seed(4)
+    obs = random_obs(16, 2, 6, g)
+    agent = planner_ppo(PPOConfig(), "thesis", 2, distance_prior=10.0)
+    prior = agent.policy.net.prior.log_weight
+    assert any(p is prior for p in agent.groups["actor"]) and not any(p is prior for p in agent.groups["critic"])
+    actions = agent.policy.net.forward_act(obs, generator=g)[0]
+    agent.policy.net.evaluate(obs, actions)[0].sum().backward()
+    assert prior.grad is not None and float(prior.grad.abs()) > 0
+    torch.testing.assert_close(prior.detach().exp(), torch.tensor([10.0]))

@@ -27,7 +27,8 @@ def test_model_keys_follow_the_level_and_the_algos_section():
                                                                    "td3.share_encoder")
     assert model_keys(Config()) == ("train.algo", "fly.collision", "fly.frames", "ppo.share_encoder")
     planner = load_config(None, ["train.algo=planner"])
-    assert model_keys(planner) == ("train.algo", "planner.network", "drones.num_drones", "drones.energy.enabled")
+    assert model_keys(planner) == ("train.algo", "planner.network", "drones.num_drones", "drones.energy.enabled",
+                                   "planner.distance_prior")
     # a planner trained without a battery cannot serve one: its observation has no energy part
     battery = load_config(None, ["train.algo=planner", "drones.energy.preset=scenario"])
     assert config_differences(battery, planner, model_keys(planner)) == [
@@ -35,6 +36,10 @@ def test_model_keys_follow_the_level_and_the_algos_section():
     # one trained with a battery serves another preset: the observation is the same, in fractions of a battery
     realistic = load_config(None, ["train.algo=planner", "drones.energy.preset=realistic"])
     assert config_differences(realistic, battery, model_keys(planner)) == []
+    # the distance prior adds a parameter: a net trained with one is a different net
+    prior = load_config(None, ["train.algo=planner", "planner.distance_prior=10"])
+    assert config_differences(prior, planner, model_keys(planner)) == [
+        "planner.distance_prior = 10.0 here but 0.0 in the checkpoint"]
 
 
 def test_the_planner_is_trained_by_the_one_ppo():
