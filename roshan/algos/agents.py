@@ -18,10 +18,12 @@ def fly_ppo(cfg: PPOConfig, collision: bool, frames: int = 3, device: str | torc
 
 def planner_ppo(cfg: PPOConfig, network: str, num_drones: int, device: str | torch.device = "cpu",
                 rnd: RNDConfig | None = None, temperature: float = 1.0, resources: bool = False,
-                distance_prior: float = 0.0) -> PPO:
-    """PPO over a planner network (``planner.network``, ``planner.temperature``, ``planner.distance_prior``);
-    ``resources``: the drones have a battery (``drones.energy``), which the network reads."""
-    return PPO(cfg, PlannerPolicy(network, num_drones, temperature, resources, distance_prior), device, rnd)
+                distance_prior: float = 0.0, distinct_goals: bool = False) -> PPO:
+    """PPO over a planner network (``planner.network``, ``planner.temperature``, ``planner.distance_prior``,
+    ``planner.distinct_goals``); ``resources``: the drones have a battery (``drones.energy``), which the network
+    reads."""
+    return PPO(cfg, PlannerPolicy(network, num_drones, temperature, resources, distance_prior, distinct_goals),
+               device, rnd)
 
 
 def make_agent(cfg: Config, device: str | torch.device = "cpu") -> Agent:
@@ -33,7 +35,7 @@ AGENTS = {
     "ppo": lambda cfg, device: fly_ppo(cfg.ppo, cfg.fly.collision, cfg.fly.frames, device, cfg.rnd),
     "planner": lambda cfg, device: planner_ppo(cfg.ppo, cfg.planner.network, cfg.drones.num_drones, device, cfg.rnd,
                                                cfg.planner.temperature, cfg.drones.energy.enabled,
-                                               cfg.planner.distance_prior),
+                                               cfg.planner.distance_prior, cfg.planner.distinct_goals),
     "td3": lambda cfg, device: TD3(cfg.td3, cfg.fly.collision, cfg.fly.frames, device),
     "iql": lambda cfg, device: IQL(cfg.iql, cfg.fly.collision, cfg.fly.frames, device),
 }

@@ -104,6 +104,22 @@ def make_distance_prior(weight: float) -> DistancePrior | None:
     return DistancePrior(weight) if weight > 0 else None
 
 
+def without_taken(row: torch.Tensor, taken: torch.Tensor) -> torch.Tensor:
+    """Logits (..., K) with the ``taken`` fires masked; a row left with nothing keeps all its candidates (a drone
+    with no free fire shares one, as the greedy heuristic's drones do)."""
+    masked = row.masked_fill(taken, float("-inf"))
+    return torch.where(torch.isfinite(masked).any(-1, keepdim=True), masked, row)
+
+
+def distinct_rows(logits: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+    """Teacher-forced (B, N, K) logits of drones choosing in id order: drone i's row without the fires drones
+    0..i-1 took in ``actions`` (the groundstation, index 0, may repeat)."""
+    onehot = F.one_hot(actions, logits.shape[-1])
+    taken = (onehot.cumsum(1) - onehot) > 0
+    taken[..., 0] = False
+    return without_taken(logits, taken)
+
+
 RESTOCK_BELOW = 0.5  # with a battery: the fill of battery or tank below which the thesis net may send a drone home
 
 
@@ -128,7 +144,8 @@ class ThesisPlannerNet(nn.Module):
     """
 
     def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS,
-                 temperature: float = 1.0, resources: bool = False, distance_prior: float = 0.0):
+                 temperature: float = 1.0, resources: bool = False, distance_prior: float = 0.0,
+                 distinct_goals: bool = False):
         super().__init__()
         self.pos_emb = nn.Linear(2, hidden)
         self.goal_emb = nn.Linear(2, hidden)
@@ -144,6 +161,7 @@ class ThesisPlannerNet(nn.Module):
         self.register_buffer("drone_ids", torch.arange(num_drones), persistent=False)
         self.temperature = temperature  # planner.temperature: logits / T, so p ~ weights^(1/T)
         self.prior = make_distance_prior(distance_prior)
+        self.distinct_goals = distinct_goals  # planner.distinct_goals: drones choose in id order, a fire once
 
     def allowed(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         """(B, 1, K) bool, the same for every drone: valid fires, or only the groundstation when no fire is valid;
@@ -210,15 +228,27 @@ class ThesisPlannerNet(nn.Module):
 
     def forward_act(self, obs: dict[str, torch.Tensor], deterministic: bool = False,
                     generator: torch.Generator | None = None):
-        """Actions (B, N), joint log-prob (B,), entropy (B,) and value (B,); drones choose independently."""
+        """Actions (B, N), joint log-prob (B,), entropy (B,) and value (B,); drones choose independently, or with
+        ``distinct_goals`` one after another, each from the fires no earlier drone took."""
         logits, value = self.heads(obs)
-        actions = sample_rows(logits, deterministic, generator)
-        log_prob, entropy = score(logits, actions)
-        return actions, log_prob, entropy, value
+        if not self.distinct_goals:
+            actions = sample_rows(logits, deterministic, generator)
+            return (actions, *score(logits, actions), value)
+        B, N, K = logits.shape
+        actions = torch.empty(B, N, dtype=torch.long, device=logits.device)
+        taken = torch.zeros(B, K, dtype=torch.bool, device=logits.device)
+        with torch.no_grad():
+            for i in range(N):
+                actions[:, i] = sample_rows(without_taken(logits[:, i], taken), deterministic, generator)
+                taken.scatter_(1, actions[:, i:i + 1], (actions[:, i:i + 1] > 0))
+        # scored with the teacher-forced rows evaluate() builds, so both agree exactly
+        return (actions, *score(distinct_rows(logits, actions), actions), value)
 
     def evaluate(self, obs: dict[str, torch.Tensor], actions: torch.Tensor):
         """Joint log-prob (B,), entropy (B,) and value (B,) of given actions (B, N)."""
         logits, value = self.heads(obs)
+        if self.distinct_goals:
+            logits = distinct_rows(logits, actions)
         return (*score(logits, actions), value)
 
     def value(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:

@@ -170,9 +170,11 @@ class PlannerPolicy:
     shares_encoder = True
 
     def __init__(self, network: str, num_drones: int, temperature: float = 1.0, resources: bool = False,
-                 distance_prior: float = 0.0):
+                 distance_prior: float = 0.0, distinct_goals: bool = False):
+        # the pointer net always decodes distinct goals; the thesis net on request (planner.distinct_goals)
+        distinct = {"distinct_goals": distinct_goals} if network == "thesis" else {}
         self.net = PLANNER_NETS[network](num_drones, temperature=temperature, resources=resources,
-                                         distance_prior=distance_prior)
+                                         distance_prior=distance_prior, **distinct)
         self.novelty_dim = (7 if resources else 5) * num_drones + 5
 
     @staticmethod

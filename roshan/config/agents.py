@@ -132,6 +132,7 @@ class PlannerConfig(Section):
                                 doc="beyond the thesis: w0 > 0 adds -w |fire - drone| (normalised map units) to each "
                                     "drone's logits, w learned from w0 (a closer fire likelier); 0 = off, the "
                                     "networks as they were")
+    distinct_goals: bool = False  # thesis net: drones choose in id order, each from the fires no earlier one took
     network: str = choice("thesis", ("thesis", "pointer"),
                           doc="the planner network: docs/model/learning.md §3.1 (thesis) or §3.2 (pointer, newest)")
     rewards: PlannerRewardConfig = field(default_factory=PlannerRewardConfig)

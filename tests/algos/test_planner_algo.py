@@ -355,3 +355,31 @@ def test_the_distance_priors_weight_is_learned_by_the_actors_optimiser():
     agent.policy.net.evaluate(obs, actions)[0].sum().backward()
     assert prior.grad is not None and float(prior.grad.abs()) > 0
     torch.testing.assert_close(prior.detach().exp(), torch.tensor([10.0]))
+
+
+@torch.no_grad()
+def test_distinct_goals_give_each_fire_to_one_drone_and_are_scored_as_they_were_drawn():
+    """planner.distinct_goals (thesis net): drones choose in id order from the fires no earlier drone took; with
+    the strong prior, drone i takes the nearest free fire (greedy's rule), and evaluate() scores what forward_act
+    drew with the same log-probs. With fewer fires than drones, the last drones share rather than go home."""
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(5)
+    N, K = 3, 12
+    obs = random_obs(64, N, K, g, n_valid=torch.randint(N + 2, K + 1, (64,), generator=g))
+    net = ThesisPlannerNet(N, distance_prior=1000.0, distinct_goals=True)
+    actions = net.forward_act(obs, deterministic=True)[0]
+    taken = torch.zeros(64, K, dtype=torch.bool)
+    for i in range(N):
+        assert bool((actions[:, i] == nearest_valid(obs, taken)[:, i]).all()), f"drone {i}"
+        taken.scatter_(1, actions[:, i:i + 1], True)
+
+    sampler = ThesisPlannerNet(N, distinct_goals=True)
+    drawn, log_prob, entropy, _ = sampler.forward_act(obs, generator=g)
+    assert bool((drawn[:, 1:] != drawn[:, :1]).all()) and bool((drawn[:, 2] != drawn[:, 1]).all())
+    again = sampler.evaluate(obs, drawn)
+    torch.testing.assert_close(again[0], log_prob)
+    torch.testing.assert_close(again[1], entropy)
+
+    two_fires = random_obs(16, N, K, g, n_valid=torch.full((16,), 3))  # groundstation + 2 fires for 3 drones
+    shared = sampler.forward_act(two_fires, generator=g)[0]
+    assert bool((shared > 0).all()) and bool((shared[:, 0] != shared[:, 1]).all())
