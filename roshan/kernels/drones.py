@@ -70,6 +70,7 @@ class DroneSim:
         self.payload_power = energy.get("payload_power", 0.0)
         self.swap_steps = max(1, round(energy.get("swap_time", 0.0) / self.dt))  # steps landed for a full battery
         self.queue_energy = self.base_queue_energy()
+        self.turn_energy = self.queue_energy / max(1, self.num_drones - 1)  # one drone's turn on the cell
 
         # field_bytes() counts these: keep it in step with them
         self.pos = ti.Vector.field(2, ti.f32, (E, N))

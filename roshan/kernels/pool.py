@@ -155,7 +155,8 @@ def take_planner_sims(land: LandCoverMap, cfg: Config, pc: PlannerConfig, num_en
             greedy_home_fixed=pc.greedy_home == "fixed", move_explorers=evaluation or greedy,
             detected=fires == "detected" or greedy, burnout=pc.burnout, max_candidates=max_candidates,
             fly_frames=fly_frames, explore_frames=explore_frames, greedy_resources=pc.greedy_resources,
-            energy_margin=pc.greedy_energy_margin, planner_resources=pc.planner_resources)
+            energy_margin=pc.greedy_energy_margin, planner_resources=pc.planner_resources,
+            queue_waiting=pc.return_queue == "waiting")
         viewer = EnvZeroFrames(drones, explorers, maps.fire_map)
         return PlannerSims(fire, drones, explorers, maps, kernels, viewer, t_max, max_candidates)
 

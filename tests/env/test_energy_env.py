@@ -120,13 +120,14 @@ def test_the_resource_aware_greedy_loses_no_drone_in_the_endurance_setting():
     env.close()
 
 
-def planner_env(energy: EnergyConfig, resources: bool = False, **rewards) -> PlannerVectorEnv:
+def planner_env(energy: EnergyConfig, resources: bool = False, queue: str = "all", **rewards) -> PlannerVectorEnv:
     """A planner-controlled env in training mode (explorers parked), 3 drones, a decision every low-level step;
-    ``resources``: planner.planner_resources; ``rewards`` replace the whole reward (every other term 0)."""
+    ``resources``: planner.planner_resources; ``queue``: planner.return_queue; ``rewards`` replace the whole
+    reward (every other term 0)."""
     zero = {k: 0.0 for k in ("goal", "burned", "ground", "timeout", "same", "extinguish", "fast", "lost")}
     cfg = Config(ignition=FIRES, drones=DroneConfig(num_drones=3, energy=energy), wind=WindConfig(speed=0.0))
     pc = PlannerConfig(interval=1, fly_model=MODEL, explorer_model=MODEL, num_explorers=2, planner_resources=resources,
-                       rewards=PlannerRewardConfig(**{**zero, **rewards}))
+                       return_queue=queue, rewards=PlannerRewardConfig(**{**zero, **rewards}))
     return PlannerVectorEnv(2, cfg, pc, controller="planner", seed=4)
 
 
@@ -232,6 +233,27 @@ def test_planner_drones_with_the_resource_rule_go_home_by_themselves_and_stay_un
     assert lost == 0.0 and int(dr.lost.to_numpy().sum()) == 0
     assert int(dr.swaps.to_numpy().min()) >= 1  # every drone went home and got a swap
     env.close()
+
+
+def test_the_waiting_queue_reserve_counts_only_the_drones_restocking_now():
+    """planner.return_queue: with `all` a drone keeps every other drone's turn at the base in reserve, with `waiting`
+    only the turns of the drones flying home or waiting there now, so out at the fires with nobody restocking it
+    turns home later, and still loses no drone."""
+    fire = torch.ones((2, 3), dtype=torch.long)
+    first_return = {}
+    for queue in ("all", "waiting"):
+        env = planner_env(EnergyConfig(preset="scenario", capacity=4000.0), resources=True, queue=queue)
+        env.reset(seed=4)
+        dr, lost = env.drones, 0.0
+        for step in range(400):
+            _, _, terms, truncs, info = env.step(fire)
+            lost += float(info["episode_energy"]["drones_lost"][terms | truncs].sum())
+            if queue not in first_return and dr.refilling.to_numpy().any():
+                first_return[queue] = step
+        assert lost == 0.0 and int(dr.lost.to_numpy().sum()) == 0, queue
+        assert int(dr.swaps.to_numpy().min()) >= 1, queue
+        env.close()
+    assert first_return["waiting"] > first_return["all"]
 
 
 @pytest.mark.slow

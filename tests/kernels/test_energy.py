@@ -145,6 +145,10 @@ def test_the_reserve_for_a_queue_at_the_base_is_every_other_drones_turn_there():
     # a 5 s refill outlasts the swap: ceil((5 + 1e-4) / 0.1) = 51 steps
     assert reserve(4, use_water_limit=True, recharge_time=5.0) == pytest.approx(3 * 5.1 * 145.0)
     assert reserve(1) == 0.0 and reserve(4, preset="off") == 0.0
+    # 16 drones with the realistic battery: fifteen 120 s swaps at full power are more than a full battery, so with
+    # every other drone's turn in reserve each drone would turn home as it left (planner.return_queue: waiting)
+    big = DroneSim(fire, DroneConfig(num_drones=16, energy=EnergyConfig(preset="realistic")))
+    assert big.queue_energy > big.battery and big.turn_energy == pytest.approx(big.queue_energy / 15)
 
 
 def test_a_swap_on_the_groundstation_restores_the_battery_after_the_set_time():
