@@ -122,10 +122,11 @@ class PlannerConfig(Section):
     greedy_energy_margin: float = num(0.25, 0.0, doc="resource-aware greedy: a drone flies home once its battery "
                                                     "holds at most (1 + margin) x the energy of the flight home, "
                                                     "plus the energy of waiting there for every other drone's turn")
-    return_queue: str = choice("all", ("all", "waiting"),
+    return_queue: str = choice("all", ("all", "waiting", "none"),
                                doc="the return rule's reserve for waiting at the base: every other drone's turn "
-                                   "(all), or the turns of the drones flying home or waiting there now (waiting: "
-                                   "with many drones the worst case is more than a battery)")
+                                   "(all), the turns of the drones flying home or waiting there now (waiting), or "
+                                   "none (landed drones swap side by side); with many drones `all` asks for more "
+                                   "than a battery")
     planner_resources: bool = False  # with a battery: planner drones go home on the aware greedy's rule by themselves
     max_candidates: int = num(0, 0, 1 << 24,
                               doc="candidate list length K (groundstation included); 0 = every cell + 1")

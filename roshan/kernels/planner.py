@@ -77,8 +77,7 @@ class PlannerKernels(EpisodeKernels):
         greedy: the drones follow the heuristic state machine (docs/model/agents.md §10.2) instead of planner goals.
         greedy_home_fixed: the heuristic with the groundstation fix (:class:`GoalRules`, ``wake_reserved``).
         greedy_resources, energy_margin: with a battery, the resource-aware heuristic (:class:`GoalRules`).
-        queue_waiting: the rule's reserve for the queue at the base counts the drones restocking now, not every
-            other drone (:meth:`GoalRules.queue_reserve`).
+        return_queue: the rule's reserve for the queue at the base (:meth:`GoalRules.queue_reserve`).
         planner_resources: with a battery, the planner's drones keep the same rule: a drone flies home on its own
             once its battery or tank runs low, and the planner's goals for it count again once it is stocked;
             choosing the groundstation for a drone short of either sends it home until stocked.
@@ -94,7 +93,7 @@ class PlannerKernels(EpisodeKernels):
                  t_max: int, coef, greedy: bool, greedy_home_fixed: bool, move_explorers: bool, detected: bool,
                  burnout: float, max_candidates: int, fly_frames: int, explore_frames: int,
                  greedy_resources: bool = False, energy_margin: float = 0.25, planner_resources: bool = False,
-                 queue_waiting: bool = False):
+                 return_queue: str = "all"):
         super().__init__(fire, t_max)
         self.drones, self.explorers, self.maps = drones, explorers, maps
         self.interval, self.coef = interval, coef
@@ -115,11 +114,11 @@ class PlannerKernels(EpisodeKernels):
         if greedy:
             self.rules = GoalRules(drones, KnownFires(fire, maps), mode=EXTINGUISH, wake_idle=True,
                                    wake_reserved=not greedy_home_fixed, sensor=maps, resources=greedy_resources,
-                                   energy_margin=energy_margin, queue_waiting=queue_waiting, land=True)
+                                   energy_margin=energy_margin, queue=return_queue, land=True)
         else:
             self.rules = GoalRules(drones, BurningCells(fire), mode=DROP_ANYWHERE, sensor=maps, land=True,
                                    resources=planner_resources, energy_margin=energy_margin,
-                                   queue_waiting=queue_waiting)
+                                   queue=return_queue)
         E, N = fire.num_envs, drones.num_drones
         self.finished = ti.field(ti.i32, E)  # greedy: ended inside this planner step, skip the rest of it
         self.objective = ti.field(ti.i32, E)  # a drone put out the last burning cell in this planner step

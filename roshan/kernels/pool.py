@@ -156,7 +156,7 @@ def take_planner_sims(land: LandCoverMap, cfg: Config, pc: PlannerConfig, num_en
             detected=fires == "detected" or greedy, burnout=pc.burnout, max_candidates=max_candidates,
             fly_frames=fly_frames, explore_frames=explore_frames, greedy_resources=pc.greedy_resources,
             energy_margin=pc.greedy_energy_margin, planner_resources=pc.planner_resources,
-            queue_waiting=pc.return_queue == "waiting")
+            return_queue=pc.return_queue)
         viewer = EnvZeroFrames(drones, explorers, maps.fire_map)
         return PlannerSims(fire, drones, explorers, maps, kernels, viewer, t_max, max_candidates)
 

@@ -147,19 +147,22 @@ class GoalRules:
             for every other drone's turn takes (:meth:`roshan.kernels.drones.DroneSim.base_queue_energy`), or its
             tank is empty, waits there until both are full, and then takes the nearest free fire (``DROP_ANYWHERE``:
             it waits there for the planner's next goal).
-        queue_waiting: the reserve for the queue at the base counts only the other drones flying home or waiting
-            there now (``planner.return_queue: waiting``) instead of every other drone (``all``): with 16 drones and
-            the realistic battery, fifteen 120 s swaps at full power ask for more than a full battery, so every
-            drone would turn home as soon as it left.
+        queue: the reserve for the queue at the base (``planner.return_queue``): every other drone's turn
+            (``all``), the turns of the other drones flying home or waiting there now (``waiting``), or none
+            (``none``: landed drones swap side by side, so no drone waits for another's turn). With 16 drones and
+            the realistic battery, fifteen 120 s swaps at full power ask for more than a full battery, so with
+            ``all`` every drone would turn home as soon as it left.
         land: with a battery, a drone that waits at the groundstation lands on its cell (:meth:`is_landed`) instead
             of following the FlyAgent: the planner's level sets it for the planner and both heuristics alike.
     """
 
     def __init__(self, drones, candidates, *, mode: int, water_policy: bool = False, sticky: bool = False,
                  wake_idle: bool = False, wake_reserved: bool = True, sensor=None, resources: bool = False,
-                 energy_margin: float = 0.25, queue_waiting: bool = False, land: bool = False):
+                 energy_margin: float = 0.25, queue: str = "all", land: bool = False):
         self.drones, self.candidates, self.mode = drones, candidates, mode
-        self.queue_waiting = queue_waiting
+        if queue not in ("all", "waiting", "none"):
+            raise ValueError(f"queue: expected all, waiting or none, got {queue!r}")
+        self.queue = queue
         self.water_policy, self.sticky, self.wake_idle = water_policy, sticky, wake_idle
         self.wake_reserved = wake_reserved
         self.resources = resources and drones.use_energy
@@ -230,12 +233,14 @@ class GoalRules:
 
     @ti.func
     def queue_reserve(self, e, d) -> ti.f32:
-        """Joules drone d keeps for waiting its turn at the base: every other drone's turn, or with
-        ``queue_waiting`` the turns of the drones flying home or waiting there now (an env's drones step one after
-        another, so the count is the same at any thread count)."""
+        """Joules drone d keeps for waiting its turn at the base (``queue``): every other drone's turn, the turns of
+        the drones flying home or waiting there now (an env's drones step one after another, so the count is the
+        same at any thread count), or none."""
         dr = self.drones
         reserve = dr.queue_energy
-        if ti.static(self.queue_waiting):
+        if ti.static(self.queue == "none"):
+            reserve = 0.0
+        if ti.static(self.queue == "waiting"):
             ahead = 0
             for o in range(dr.num_drones):
                 if o != d and dr.refilling[e, o] != 0 and dr.lost[e, o] == 0:

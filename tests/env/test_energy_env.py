@@ -237,11 +237,11 @@ def test_planner_drones_with_the_resource_rule_go_home_by_themselves_and_stay_un
 
 def test_the_waiting_queue_reserve_counts_only_the_drones_restocking_now():
     """planner.return_queue: with `all` a drone keeps every other drone's turn at the base in reserve, with `waiting`
-    only the turns of the drones flying home or waiting there now, so out at the fires with nobody restocking it
-    turns home later, and still loses no drone."""
+    only the turns of the drones flying home or waiting there now, with `none` nothing (landed drones swap side by
+    side), so out at the fires with nobody restocking it turns home later, and still loses no drone."""
     fire = torch.ones((2, 3), dtype=torch.long)
     first_return = {}
-    for queue in ("all", "waiting"):
+    for queue in ("all", "waiting", "none"):
         env = planner_env(EnergyConfig(preset="scenario", capacity=4000.0), resources=True, queue=queue)
         env.reset(seed=4)
         dr, lost = env.drones, 0.0
@@ -253,7 +253,7 @@ def test_the_waiting_queue_reserve_counts_only_the_drones_restocking_now():
         assert lost == 0.0 and int(dr.lost.to_numpy().sum()) == 0, queue
         assert int(dr.swaps.to_numpy().min()) >= 1, queue
         env.close()
-    assert first_return["waiting"] > first_return["all"]
+    assert first_return["none"] >= first_return["waiting"] > first_return["all"]
 
 
 @pytest.mark.slow
