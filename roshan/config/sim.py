@@ -120,6 +120,10 @@ class EnergyConfig(Section):
     payload_power: float | None = num(None, 0.0, doc="extra power with a full tank (W), scaled by the tank's fill "
                                                      "with the water limit (else always full)")
     swap_time: float | None = num(None, 0.0, doc="seconds on the groundstation cell to swap in a full battery")
+    approach: float = num(0.0, 0.0, doc="cells from the groundstation's centre within which a drone flying home "
+                                        "(with the landing rule of the planner level) flies the final approach "
+                                        "straight in, out of the others' way: like a landed drone it neither sees "
+                                        "nor is seen by them, nor the map's edge (0: off)")
 
     @property
     def enabled(self) -> bool:

@@ -71,6 +71,8 @@ class DroneSim:
         self.swap_steps = max(1, round(energy.get("swap_time", 0.0) / self.dt))  # steps landed for a full battery
         self.queue_energy = self.base_queue_energy()
         self.turn_energy = self.queue_energy / max(1, self.num_drones - 1)  # one drone's turn on the cell
+        # cells: a drone flying home within them of the base's centre is on its final approach (0 = off)
+        self.approach = cfg.energy.approach if self.use_energy else 0.0
 
         # field_bytes() counts these: keep it in step with them
         self.pos = ti.Vector.field(2, ti.f32, (E, N))
@@ -343,26 +345,32 @@ class DroneSim:
         """docs/model/agents.md §3.3: per drone, the nearest boundary and every other drone within half the view
         range. With a battery, a drone on the groundstation cell is landed (it draws nothing there): on the ground, it
         neither sees nor is seen by the others and collides with none (issue 33: three drones landed there kept a
-        fourth, which the collision FlyAgent steered around them, 8-13 m off the cell until its battery ran out)."""
+        fourth, which the collision FlyAgent steered around them, 8-13 m off the cell until its battery ran out).
+        With ``energy.approach`` a drone on its final approach (:meth:`is_approaching`) is down too, and no longer
+        sees the map's edge: on Borkenberge with 16 drones, drones arriving together at a base in the map's corner
+        hovered 1-2 cells off it until their batteries were empty."""
         for i in range(self.num_drones):
             x = self.pos[e, i] / self.cell
             b = self.nearest_boundary(x)
-            if ti.abs(b[0]) <= self.half_view and ti.abs(b[1]) <= self.half_view:
+            i_down = 0
+            if ti.static(self.use_energy):
+                i_down = self.is_down(e, i)
+            sees_edge = 1
+            if ti.static(self.approach > 0.0):
+                sees_edge = 1 - i_down
+            if sees_edge != 0 and ti.abs(b[0]) <= self.half_view and ti.abs(b[1]) <= self.half_view:
                 self.neighbours[e, i, 0] = ti.Vector([b[0] / self.half_view, b[1] / self.half_view, 0.0, 0.0])
                 self.neighbour_mask[e, i, 0] = 1
             else:
                 self.neighbours[e, i, 0] = ti.Vector([0.0, 0.0, 0.0, 0.0])
                 self.neighbour_mask[e, i, 0] = 0
             slot = 1
-            i_landed = 0
-            if ti.static(self.use_energy):
-                i_landed = self.at_groundstation(e, i)
             for j in range(self.num_drones):
                 if j != i:
                     dxy = self.pos[e, j] / self.cell - x
                     airborne = 1  # both in the air
                     if ti.static(self.use_energy):
-                        airborne = ti.cast(i_landed + self.at_groundstation(e, j) == 0, ti.i32)
+                        airborne = ti.cast(i_down + self.is_down(e, j) == 0, ti.i32)
                     if airborne != 0 and ti.abs(dxy[0]) < self.half_view and ti.abs(dxy[1]) < self.half_view:
                         vn = self.vel[e, j] / (self.v_max * self.s_norm)
                         self.neighbours[e, i, slot] = ti.Vector([dxy[0] / self.view, dxy[1] / self.view, vn[0], vn[1]])
@@ -393,6 +401,35 @@ class DroneSim:
         return best
 
     # ------------------------------------------------------------------------------------------ goals
+
+    @ti.func
+    def is_approaching(self, e, d) -> ti.i32:
+        """Flying home (``refilling``) within ``approach`` cells of the groundstation's centre (``approach`` > 0)."""
+        near = 0
+        if ti.static(self.approach > 0.0):
+            if self.refilling[e, d] != 0:
+                gap = self.pos[e, d] / self.cell - self.groundstation_centre(e)
+                near = ti.cast(gap.dot(gap) <= self.approach * self.approach, ti.i32)
+        return near
+
+    @ti.func
+    def is_down(self, e, d) -> ti.i32:
+        """Landed on the groundstation cell, or on its final approach: out of the other drones' way."""
+        down = self.at_groundstation(e, d)
+        if ti.static(self.approach > 0.0):
+            down = ti.max(down, self.is_approaching(e, d))
+        return down
+
+    @ti.func
+    def approach_action(self, e, d):
+        """The velocity command that flies drone d straight to the groundstation's centre, as fast as allowed and
+        no further (the final approach, ``approach``; in acceleration mode the command that brakes towards it)."""
+        want = ti.math.clamp((self.groundstation_centre(e) * self.cell - self.pos[e, d]) / self.dt,
+                             -self.v_max, self.v_max)
+        a = want / self.v_max
+        if ti.static(self.use_accel):
+            a = ti.math.clamp((want - self.vel[e, d]) / (self.accel * self.dt), -1.0, 1.0)
+        return a
 
     @ti.func
     def groundstation_centre(self, e):

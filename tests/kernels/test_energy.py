@@ -215,3 +215,51 @@ def test_battery_trajectories_are_the_same_at_one_and_two_threads():
     lost, digest = outs[0].split()
     assert 0 < int(lost) < 32  # some drones came down, not all: the rule ran both ways
     assert len(digest) == len(hashlib.sha256().hexdigest())
+
+
+@pytest.mark.parametrize("approach", [0.0, 2.0])
+def test_a_drone_flying_home_within_the_approach_is_out_of_the_others_way(approach):
+    """energy.approach: a drone flying home within that many cells of the groundstation's centre is down, like a
+    landed one: it neither sees nor is seen by the other drones, nor sees the map's edge (on Borkenberge with 16
+    drones, drones arriving together at the corner base hovered 1-2 cells off it until their batteries were
+    empty). 0 (the default): only a drone on the cell is down, so both see each other and the edge."""
+    fire = FireSim(load_map("35x36_Woods"), ignition=IgnitionConfig(fire_percentage=0.0), num_envs=1, seed=0)
+    fire.reset()
+    drones = DroneSim(fire, DroneConfig(num_drones=2, use_vel_bins=False,
+                                        energy=EnergyConfig(preset="scenario", approach=approach)))
+    drones.reset()
+    centre = (drones.groundstation.to_numpy()[0] + 0.5) * drones.cell
+    inward = np.sign(np.array([drones.rows, drones.cols]) / 2 * drones.cell - centre)
+    home_bound = centre + inward * 1.0 * drones.cell  # 1.4 cells off the base, towards the map's middle
+    other = centre + inward * 3.0 * drones.cell
+    drones.refilling.from_numpy(np.array([[1, 0]], np.int32))  # drone 0 flies home, drone 1 does not
+    drones.set_state(np.array([[home_bound, other]], np.float32), np.zeros((1, 2, 2), np.float32))
+    mask = drones.neighbour_mask.to_numpy()[0]  # (drone, slot): slot 0 the edge, slot 1 the other drone
+    sees = approach == 0.0
+    assert mask[0, 1] == sees and mask[1, 1] == sees
+    assert mask[0, 0] == sees  # the edges are 2.5 cells from drone 0
+    drones.refilling.from_numpy(np.array([[0, 0]], np.int32))  # not flying home: in the air as any drone
+    drones.set_state(np.array([[home_bound, other]], np.float32), np.zeros((1, 2, 2), np.float32))
+    assert drones.neighbour_mask.to_numpy()[0, 0, 1] == 1 and drones.neighbour_mask.to_numpy()[0, 0, 0] == 1
+
+
+@ti.kernel
+def fly_final_approach(drones: ti.template(), steps: ti.i32):
+    """Drone 0 of env 0 flies ``steps`` steps by the final-approach command (GoalRules.drone_step's choice)."""
+    for _ in range(1):
+        for _k in range(steps):
+            drones.move_drone(0, 0, drones.approach_action(0, 0))
+
+
+def test_the_final_approach_flies_straight_onto_the_groundstation_cell_and_lands():
+    """energy.approach: 1.4 cells off the base's centre, the approach command brings the drone onto the cell within
+    the time the straight flight takes at v_max, and it stays there (landed, drawing nothing)."""
+    drones = make(approach=2.0)
+    centre = (drones.groundstation.to_numpy()[0] + 0.5) * drones.cell
+    inward = np.sign(np.array([drones.rows, drones.cols]) / 2 * drones.cell - centre)
+    put(drones, tuple(centre + inward * drones.cell))
+    fly_final_approach(drones, int(np.ceil(drones.cell / (drones.v_max * DT))) + 1)
+    np.testing.assert_allclose(drones.pos.to_numpy()[0, 0], centre, atol=1e-3)
+    battery = scalar(drones.energy)
+    fly_final_approach(drones, 10)
+    assert scalar(drones.energy) == battery  # on the cell: landed, nothing drawn
