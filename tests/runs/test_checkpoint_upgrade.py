@@ -1,5 +1,6 @@
 """Checkpoints and run configs of the two-PPO era (a ``planner_ppo`` section, the planner's single optimiser)
-load into the one PPO: the shipped planner keeps its weights and hyperparameters, and resumes."""
+load into the one PPO: the first shipped planner (tests/data/planner_v1) keeps its weights and hyperparameters, and
+resumes."""
 
 from pathlib import Path
 
@@ -14,7 +15,7 @@ from roshan.checkpoints import config_of_checkpoint, load_checkpoint, resolve_ch
 from roshan.config import Config, ConfigError, TrainConfig, all_keys, apply_overrides, load_config, to_dict
 
 ROOT = Path(__file__).resolve().parents[2]
-PLANNER = ROOT / "models" / "planner"
+PLANNER = ROOT / "tests" / "data" / "planner_v1"  # the first shipped planner, of the two-PPO era
 
 
 def raw_checkpoint(path: Path) -> dict:
@@ -32,10 +33,10 @@ def same_tree(a, b) -> bool:
     return a == b
 
 
-def test_the_shipped_planner_checkpoint_loads_with_its_weights_and_hyperparameters():
+def test_the_first_shipped_planner_checkpoint_loads_with_its_weights_and_hyperparameters():
     path = resolve_checkpoint(PLANNER)
     raw = raw_checkpoint(path)
-    assert "planner_ppo" in raw["config"] and "optimizer" in raw["agent"]  # the old layout is what is shipped
+    assert "planner_ppo" in raw["config"] and "optimizer" in raw["agent"]  # the old layout
     state = load_checkpoint(path)
     cfg = config_of_checkpoint(state, str(path))
     old = raw["config"]["planner_ppo"]
