@@ -17,7 +17,7 @@ from roshan.checkpoints import (
     resolve_checkpoint,
     setting,
 )
-from roshan.config import Config
+from roshan.config import Config, apply_overrides
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
@@ -67,6 +67,15 @@ def check_setting(trained: Config, cfg: Config, where: str | Path) -> None:
         raise CheckpointMismatch(f"{where}: the network cannot serve this setting: " + "; ".join(diffs))
     for key in cfg.train.level.frozen_models:
         check_fly_model(setting(cfg, key), key)
+
+
+def load_for_acting(target: str | Path, which: str, overrides, device: str | torch.device = "cpu"):
+    """(trained config, acting config, agent, checkpoint path): a checkpoint loaded for deterministic acting under
+    ``overrides`` (``section.key=value``), refused before any env is built where its network cannot serve them."""
+    trained, agent, path = load_agent(target, which, device)
+    cfg = apply_overrides(trained, overrides) if overrides else trained
+    check_setting(trained, cfg, path)
+    return trained, cfg, agent, path
 
 
 def policy_fn(agent: Agent):

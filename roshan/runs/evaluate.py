@@ -17,10 +17,10 @@ import torch
 from tqdm import tqdm
 
 from roshan.algos.buffers import ReplayBuffer
-from roshan.algos.frozen import check_setting, load_agent, policy_fn
+from roshan.algos.frozen import load_for_acting, policy_fn
 from roshan.algos.networks import flatten_drones
 from roshan.checkpoints import folder_lock, resolve_checkpoint
-from roshan.config import PLANNER, Config, apply_overrides
+from roshan.config import PLANNER, Config
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import straight_to_goal
 from roshan.episode import ENERGY_FIELDS, EPISODE_FIELDS, FIRE_FIELDS, REASONS, RECORD_FIELDS
@@ -353,9 +353,7 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
     layouts and wind) and its summary is returned under ``"baseline"``.
     Returns the summary dict of :func:`roshan.runs.report.stats.summarize` plus ``checkpoint`` and ``out_dir``."""
     ensure_taichi()
-    trained, agent, path = load_agent(target, which, torch_device())
-    cfg = apply_overrides(trained, overrides) if overrides else trained
-    check_setting(trained, cfg, path)
+    _, cfg, agent, path = load_for_acting(target, which, overrides, torch_device())
     use_acting_threads(cfg.train.torch_threads)
     run_dir = path.parent.parent if path.parent.name == "checkpoints" else path.parent
     E = max(1, min(num_envs or cfg.train.eval_envs, episodes))
@@ -434,12 +432,10 @@ def save_buffer(target: str | Path, transitions: int, path: Path, seed: int = 0,
     ``path`` is refused unless ``replace``."""
     refuse_overwrite(path, "the replay buffer", replace)
     ensure_taichi()
-    trained, agent, ckpt = load_agent(target, which, torch_device())
+    trained, cfg, agent, ckpt = load_for_acting(target, which, overrides, torch_device())
     if not trained.train.level.flies:
         raise ValueError(f"{ckpt}: a planner checkpoint; replay buffers record FlyAgent transitions (--save-buffer "
                          "needs a FlyAgent run)")
-    cfg = apply_overrides(trained, overrides) if overrides else trained
-    check_setting(trained, cfg, ckpt)
     prepare_output(path, "the replay buffer", is_dir=False)
     E = num_envs or cfg.train.eval_envs
     env = FlyVectorEnv(num_envs=E, config=cfg, fly=cfg.fly, seed=seed)

@@ -13,9 +13,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from roshan.algos.frozen import check_setting, load_agent, policy_fn
+from roshan.algos.frozen import load_for_acting, policy_fn
 from roshan.algos.networks import flatten_drones
-from roshan.config import apply_overrides
 from roshan.ggui import open_shown_window
 from roshan.io import prepare_output, refuse_overwrite, write_gif, writing
 from roshan.runs.envs import caption_name, make_env
@@ -52,9 +51,7 @@ def watch(target: str | Path, steps: int | None = None, seed: int = 0, which: st
     if not has_display():  # the GIF will be written: refuse an existing one before any work
         refuse_overwrite(gif_path, "the GIF", replace)
     ensure_taichi()
-    trained, agent, path = load_agent(target, which, torch_device())
-    cfg = apply_overrides(trained, overrides) if overrides else trained
-    check_setting(trained, cfg, path)
+    _, cfg, agent, path = load_for_acting(target, which, overrides, torch_device())
     use_acting_threads(cfg.train.torch_threads)
     run_dir = path.parent.parent if path.parent.name == "checkpoints" else path.parent
     env = make_env(cfg, 1, seed, evaluation=True, render_mode="rgb_array")  # it keeps each episode's final frame
