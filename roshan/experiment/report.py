@@ -130,7 +130,8 @@ def markdown(spec: Spec, rows: list[dict], results: dict[str, dict] | None = Non
            "all seeds. *best*: the weights of the best periodic evaluation (selected on other episodes); *last*: "
            "the last weights; *objective*: the best training-objective checkpoint, the thesis's rule ('-': not "
            "recorded for every seed; runs made before it was evaluated have none). *code*: the commit each row's "
-           "seeds ran ('mixed' when they differ, '+' uncommitted changes).", "",
+           "seeds ran ('mixed' when they differ, '+' uncommitted changes, '?' a run finished before results recorded "
+           "their commit).", "",
            "| condition | seeds | code | metric | ours: best | last | objective | thesis |",
            "|---|---|---|---|---|---|---|---|"]
     for cond, row in zip(spec.conditions, rows, strict=True):
