@@ -58,8 +58,8 @@ def _figures(done: list[dict]) -> dict:
 
 def condition_rows(spec: Spec, results: dict[str, dict]) -> list[dict]:
     """One aggregate per condition: seeds done of planned, each rate's seed statistics, TTE over episodes (best
-    weights), the same figures with the last and the training-objective weights where every seed has them, and
-    the code commits the seeds ran."""
+    weights), the same figures with the last and the training-objective weights over the seeds that have them
+    (``last_seeds``, ``objective_seeds``), and the code commits the seeds ran."""
     rows = []
     for cond in spec.conditions:
         done = done_results(spec, results, cond)
@@ -67,8 +67,10 @@ def condition_rows(spec: Spec, results: dict[str, dict]) -> list[dict]:
         if done:
             row.update(_figures(done))
             for key in ("last", "objective"):
-                if cond.trains and all(key in r for r in done):
-                    row[key] = _figures([r[key] for r in done])
+                have = [r[key] for r in done if key in r]
+                if cond.trains and have:  # runs made before a set of weights was evaluated have none
+                    row[key] = _figures(have)
+                    row[f"{key}_seeds"] = len(have)
             row["commits"] = commits(done)
             row["minutes"] = float(sum(r.get("minutes", 0.0) for r in done))
             row["episodes"] = int(sum(r["episodes"] for r in done))
@@ -91,6 +93,14 @@ def _cell(ref: Reference | None, digits: int = 1) -> str:
     if ref is None:
         return "-"
     return f"{ref.mean:.{digits}f} ± {ref.std:.{digits}f} ({ref.median:.{digits}f})"
+
+
+def _weights_cell(row: dict, key: str, metric: str, digits: int) -> str:
+    """A metric with the ``key`` weights (last, objective), marked ``[k of n]`` where only k of the row's n seeds
+    have them."""
+    text = _cell((row.get(key) or {}).get(metric), digits)
+    k = row.get(f"{key}_seeds", 0)
+    return text if k in (0, row["seeds"]) else f"{text} [{k} of {row['seeds']}]"
 
 
 def _shown_rates(cond: Condition, row: dict) -> list[str]:
@@ -128,10 +138,10 @@ def markdown(spec: Spec, rows: list[dict], results: dict[str, dict] | None = Non
     out = [f"Experiment `{spec.name}` ({spec.path}, budget {spec.budget}). Rates in % of evaluation episodes, "
            "mean ± std (median) over seeds (std: ddof = 0); TTE in low-level steps over all evaluation episodes of "
            "all seeds. *best*: the weights of the best periodic evaluation (selected on other episodes); *last*: "
-           "the last weights; *objective*: the best training-objective checkpoint, the thesis's rule ('-': not "
-           "recorded for every seed; runs made before it was evaluated have none). *code*: the commit each row's "
-           "seeds ran ('mixed' when they differ, '+' uncommitted changes, '?' a run finished before results recorded "
-           "their commit).", "",
+           "the last weights; *objective*: the best training-objective checkpoint, the thesis's rule ('-': recorded "
+           "for no seed; '[k of n]': over the k seeds that have it, runs made before it was evaluated have none). "
+           "*code*: the commit each row's seeds ran ('mixed' when they differ, '+' uncommitted changes, '?' a run "
+           "finished before results recorded their commit).", "",
            "| condition | seeds | code | metric | ours: best | last | objective | thesis |",
            "|---|---|---|---|---|---|---|---|"]
     for cond, row in zip(spec.conditions, rows, strict=True):
@@ -142,8 +152,7 @@ def markdown(spec: Spec, rows: list[dict], results: dict[str, dict] | None = Non
         metrics = _shown_rates(cond, row) + (["tte"] if row.get("tte") is not None else [])
         for i, m in enumerate(metrics):
             digits = 0 if m == "tte" else 1
-            cells = [_cell(row.get(m), digits)] + [_cell((row.get(k) or {}).get(m), digits)
-                                                    for k in ("last", "objective")]
+            cells = [_cell(row.get(m), digits)] + [_weights_cell(row, k, m, digits) for k in ("last", "objective")]
             ref = str(cond.thesis[m]) if m in cond.thesis else "-"
             label = "TTE (steps)" if m == "tte" else f"{m} %"
             first = i == 0
