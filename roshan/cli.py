@@ -531,9 +531,10 @@ BUDGET = click.option("--budget", type=click.Choice(["local", "thesis"]), defaul
 @click.option("--only", multiple=True, metavar="CONDITION",
               help="Run only these conditions (names or shell patterns such as 'E2_*'; repeat for more); the "
                    "others stay queued for a later call or another machine.")
-@click.option("--rerun", multiple=True, metavar="CONDITION",
-              help="Run these conditions' finished runs once more with the code here now (names or patterns; "
-                   "the newest result is reported, earlier ones stay in the journal).")
+@click.option("--rerun", multiple=True, metavar="CONDITION[/seed_S]",
+              help="Run these conditions' finished runs, or these runs, once more with the code here now (names or "
+                   "patterns, such as 'E5' or 'E5*/seed_[012]'; the newest result is reported, earlier ones stay in "
+                   "the journal).")
 @click.option("--worker", is_flag=True, hidden=True)
 @click.option("--slot", type=click.IntRange(min=0), default=0, hidden=True)
 @ARCH
@@ -555,7 +556,7 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
             sys.exit(run_worker(spec, url, root, heartbeat=heartbeat, max_retry=max_retry, extra=extra, only=chosen))
         args = (["--arch", arch] if arch else []) + (["--threads", str(threads)] if threads else [])
         run_experiment(spec, root, storage, workers, args, heartbeat, max_retry, echo=click.echo, only=chosen,
-                       rerun=spec.select(rerun, "--rerun") if rerun else ())
+                       rerun=spec.select_runs(rerun) if rerun else ())
     click.echo(f"report: roshan experiment report {spec_path}" + (f" --budget {budget}" if budget != "local" else "")
                + (f" --storage {storage}" if storage else "") + (f" --root {root}" if root != "runs" else ""))
 

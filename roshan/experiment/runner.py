@@ -128,18 +128,19 @@ def drop_orphans(study: optuna.Study, spec: Spec, echo: Callable[[str], None] = 
 
 def queue_reruns(study: optuna.Study, spec: Spec, patterns: tuple[str, ...],
                  echo: Callable[[str], None] = print) -> int:
-    """Queue the finished runs of the conditions ``patterns`` names once more, to be made by the code that runs
-    them now (in a folder of their own); the newest result of a run is the one reported, the earlier ones stay in
-    the journal. A run whose rerun is already queued or running is left alone. Returns how many were queued."""
+    """Queue the finished runs that ``patterns`` name (conditions, or runs ``CONDITION/seed_S``:
+    :meth:`Spec.select_runs`) once more, to be made by the code that runs them now (in a folder of their own); the
+    newest result of a run is the one reported, the earlier ones stay in the journal. A run whose rerun is already
+    queued or running is left alone. Returns how many were queued."""
     newest: dict[str, optuna.trial.FrozenTrial] = {}
     for t in study.get_trials(deepcopy=False):
         if run_key(t) is not None:
             newest[run_key(t)] = t  # trials come in number order
     queued = 0
-    for run in spec.runs(spec.select(patterns)):
-        t = newest.get(run.key)
+    for key in spec.select_runs(patterns):
+        t = newest.get(key)
         if t is not None and t.state == TrialState.COMPLETE:
-            study.enqueue_trial({}, user_attrs={RUN_ATTR: run.key, RERUN_ATTR: t.number})
+            study.enqueue_trial({}, user_attrs={RUN_ATTR: key, RERUN_ATTR: t.number})
             queued += 1
     echo(f"experiment {spec.name}: {queued} finished run(s) of {', '.join(patterns)} queued again")
     return queued
@@ -460,8 +461,8 @@ def run_experiment(spec: Spec, root: str | Path = "runs", storage: str | None = 
                    rerun: tuple[str, ...] = ()) -> optuna.Study:
     """``roshan experiment run``: create or continue the experiment and run its waiting runs with ``workers``
     processes on this machine (only the runs of the conditions ``only`` names, when given: the whole spec is
-    still created, so other runs keep their place for a later call), after queueing the finished runs of the
-    conditions ``rerun`` names again; returns the study."""
+    still created, so other runs keep their place for a later call), after queueing the finished runs that
+    ``rerun`` names (conditions or runs ``CONDITION/seed_S``) again; returns the study."""
     check_trainable(spec, only)
     url = spec_storage(spec, root, storage)
     store = open_storage(url, heartbeat, max_retry, repair=True, echo=echo)

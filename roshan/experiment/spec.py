@@ -170,6 +170,20 @@ class Spec:
                 raise SpecError(f"{self.path}: {option} {p!r} matches no condition; it has {', '.join(names)}")
         return tuple(n for n in names if any(fnmatch.fnmatchcase(n, p) for p in patterns))
 
+    def select_runs(self, patterns: tuple[str, ...], option: str = "--rerun") -> tuple[str, ...]:
+        """The keys of the runs that ``patterns`` name, in the spec's order: a condition (name or shell pattern: all
+        its seeds) or runs (``CONDITION/seed_S``, patterns too, such as ``E5*/seed_[012]``). A pattern that matches
+        nothing is an error."""
+        runs = self.runs()
+        chosen = set()
+        for p in patterns:
+            hit = {r.key for r in runs if fnmatch.fnmatchcase(r.condition.name, p) or fnmatch.fnmatchcase(r.key, p)}
+            if not hit:
+                raise SpecError(f"{self.path}: {option} {p!r} matches no condition or run (CONDITION/seed_S); it has "
+                                f"{', '.join(c.name for c in self.conditions)}")
+            chosen |= hit
+        return tuple(r.key for r in runs if r.key in chosen)
+
     def condition(self, name: str) -> Condition:
         for c in self.conditions:
             if c.name == name:

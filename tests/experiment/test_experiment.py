@@ -243,6 +243,22 @@ def test_a_rerun_makes_finished_runs_again_in_their_own_folders_and_its_result_i
     assert progress(study, {"fast/seed_0", "fast/seed_1"})["done"] == 2
 
 
+def test_a_rerun_can_name_single_runs_of_a_condition(tmp_path):
+    spec, url, study = start(write_spec(tmp_path), tmp_path)
+    assert spec.select_runs(("more_seeds/seed_[57]", "fast")) == ("fast/seed_0", "fast/seed_1", "more_seeds/seed_5",
+                                                                 "more_seeds/seed_7")
+    with pytest.raises(SpecError, match=r"--rerun 'more_seeds/seed_6' matches no condition or run"):
+        spec.select_runs(("more_seeds/seed_6",))
+    log = tmp_path / "log"
+    while run_worker(spec, url, tmp_path, execute=recording_execute(log), only=("more_seeds",)) == 0 \
+            and progress(study, {r.key for r in spec.runs(("more_seeds",))})["waiting"]:
+        pass
+    assert queue_reruns(study, spec, ("more_seeds/seed_7",), echo=lambda _: None) == 1  # seed 7 alone
+    assert progress(study, {"more_seeds/seed_5", "more_seeds/seed_7", "more_seeds/seed_11"})["waiting"] == 1
+    assert run_worker(spec, url, tmp_path, execute=recording_execute(log), only=("more_seeds",)) == 0
+    assert lines(log, "done") == ["more_seeds/seed_5", "more_seeds/seed_7", "more_seeds/seed_11", "more_seeds/seed_7"]
+
+
 def test_two_workers_sharing_a_storage_never_run_the_same_run_twice(tmp_path):
     spec_path = write_spec(tmp_path)
     spec, url, _ = start(spec_path, tmp_path)
