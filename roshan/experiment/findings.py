@@ -1,5 +1,7 @@
 """The thesis's qualitative findings as checks on an experiment's figures, each with a verdict: confirmed,
-contradicted, or untested (a condition it needs has no result yet).
+contradicted, or untested (a condition it needs has no result yet). A finding whose failed checks are all ties
+(both rows at 100 % success, say) is "contradicted, by ties only": the claimed order does not show, but no figure
+goes the other way either, so these episodes cannot separate the rows.
 
 A spec lists them under ``findings``::
 
@@ -104,8 +106,9 @@ def figure(results: list[dict], name: str, weights: str) -> float | None:
 
 
 def verdict(finding: Finding, by_condition: dict[str, list[dict]], weights: str) -> tuple[str, list[str]]:
-    """``confirmed`` / ``contradicted`` / ``untested`` with ``weights``, and each check with its figures."""
-    shown, outcomes, missing = [], [], []
+    """``confirmed`` / ``contradicted`` / ``contradicted, by ties only`` / ``untested`` with ``weights``, and each
+    check with its figures."""
+    shown, outcomes, missing, reversed_ = [], [], [], False
     for c in finding.checks:
         lhs = figure(by_condition.get(c.condition, []), c.figure, weights)
         rhs = c.number if c.other is None else figure(by_condition.get(c.other, []), c.other_figure, weights)
@@ -115,12 +118,14 @@ def verdict(finding: Finding, by_condition: dict[str, list[dict]], weights: str)
             continue
         ok = _OPS[c.op](lhs, rhs)
         outcomes.append(ok)
+        reversed_ |= not ok and lhs != rhs
         other = "" if c.other is None else f"{c.other}.{c.other_figure} "
-        shown.append(f"{c.condition}.{c.figure} {lhs:.1f} {c.op} {other}{rhs:.1f}" + ("" if ok else " (fails)"))
+        failed = " (fails)" if lhs != rhs else " (fails: equal)"
+        shown.append(f"{c.condition}.{c.figure} {lhs:.1f} {c.op} {other}{rhs:.1f}" + ("" if ok else failed))
     if missing:
         shown.append(f"no figures yet for {', '.join(missing)}")
     if any(o is False for o in outcomes):
-        return "contradicted", shown
+        return ("contradicted" if reversed_ else "contradicted, by ties only"), shown
     return ("untested" if missing else "confirmed"), shown
 
 
@@ -132,7 +137,9 @@ def findings_markdown(findings: tuple[Finding, ...], by_condition: dict[str, lis
         return ""
     out = ["", "## The thesis's findings", "",
            "Each finding's checks judged with the best, last and training-objective weights (a scripted controller "
-           "has one set of figures). Rates are means over seeds in %, TTE in low-level steps over all episodes.", ""]
+           "has one set of figures). Rates are means over seeds in %, TTE in low-level steps over all episodes. "
+           "*contradicted, by ties only*: every check that fails compares equal figures (both rows at 100 % "
+           "success, say), so the claimed order does not show but none goes the other way either.", ""]
     for f in findings:
         names = sorted({c.condition for c in f.checks} | {c.other for c in f.checks if c.other})
         short = [f"{n} {seeds[n][0]}/{seeds[n][1]}" for n in names if seeds[n][0] < seeds[n][1]]

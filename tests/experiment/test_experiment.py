@@ -524,6 +524,28 @@ def test_findings_are_judged_from_the_figures_with_each_set_of_weights(tmp_path)
     assert "  - objective: **untested**: no figures yet for greedy, fast\n" in text
 
 
+def test_a_finding_failed_only_by_equal_figures_says_so(tmp_path):
+    ties = """
+findings:
+  - claim: fast beats more seeds
+    holds: [fast.success > more_seeds.success, fast.success >= 0]
+"""
+    spec = load_spec(write_spec(tmp_path, SPEC + ties))
+    results = {r.key: fake_result(r) for r in spec.runs() if r.condition.name != "greedy"}
+    for r in results.values():  # last weights: every seed at 0 % success, so the two rows are equal
+        r["last"] = {"success_rate": 0.0, "failure_rates": {}, "tte_episodes": [100]}
+    by_cond = {c.name: done_results(spec, results, c) for c in spec.conditions}
+    (claim,) = spec.findings
+    assert verdict(claim, by_cond, "last") == (
+        "contradicted, by ties only", ["fast.success 0.0 > more_seeds.success 0.0 (fails: equal)",
+                                       "fast.success 0.0 >= 0.0"])
+    # best weights: 12.5 % against 25 %, the other way round: a contradiction proper
+    assert verdict(claim, by_cond, "best") == (
+        "contradicted", ["fast.success 12.5 > more_seeds.success 25.0 (fails)", "fast.success 12.5 >= 0.0"])
+    text = markdown(spec, condition_rows(spec, results), results)
+    assert "  - last: **contradicted, by ties only**: fast.success 0.0 > more_seeds.success 0.0 (fails: equal)" in text
+
+
 @pytest.mark.parametrize("check, message", [
     ("fast.success >> 3", "is not a check"),
     ("nope.success > 3", "no condition 'nope'"),
