@@ -28,6 +28,22 @@ def _check_threads(ctx, param, value):
 
 THREADS = click.option("--threads", type=click.IntRange(min=1), default=None, callback=_check_threads,
                        help="CPU threads (default: all cores; more than the machine has run slower).")
+def _torch_kernels(ctx, param, value):
+    """Apply the reproducible mode (or record that it is off) before the command imports torch."""
+    from roshan import reproducible
+
+    try:
+        reproducible.enable(reproducible.wanted(value))
+    except reproducible.ReproducibleModeError as exc:
+        raise click.UsageError(str(exc)) from exc
+    return value
+
+
+REPRODUCIBLE = click.option(
+    "--reproducible/--no-reproducible", default=None, callback=_torch_kernels, expose_value=False, is_eager=True,
+    help="Torch kernels that give the same weights and figures on every x86-64 CPU, Intel or AMD (the default; "
+         "training's updates run about half as fast); --no-reproducible takes the fastest kernels this CPU offers, "
+         "whose results differ by vendor. ROSHAN_REPRODUCIBLE=0 makes --no-reproducible the default.")
 SETS = click.option("--set", "sets", multiple=True, metavar="KEY=VALUE",
                     help="Override a config key, e.g. --set fire.dt=0.05 (repeatable).")
 CONFIG = click.option("--config", "-c", "config_path", type=click.Path(dir_okay=False), default=None,
@@ -238,6 +254,7 @@ def config_show(section):
 @SETS
 @ARCH
 @THREADS
+@REPRODUCIBLE
 def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threads):
     """Train a FlyAgent (train.algo: ppo, td3 or iql) or the planner over a frozen FlyAgent (train.algo: planner,
     PPO; configs/planner.yaml) from CONFIG (see configs/), or --resume a run.
@@ -300,6 +317,7 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
 @SETS
 @ARCH
 @THREADS
+@REPRODUCIBLE
 def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, replace, frames_dir, gif_path, baseline,
              save_buffer, maps, quiet, sets, arch, threads):
     """Evaluate a trained FlyAgent or planner (a run folder or a checkpoint file) with deterministic actions.
@@ -396,6 +414,7 @@ def _eval_maps(target, maps, episodes, seed, envs, which, out_dir, replace, base
 @SETS
 @ARCH
 @THREADS
+@REPRODUCIBLE
 def watch(target, steps, seed, which, fps, gif_path, screenshot, replace, sets, arch, threads):
     """Watch a trained FlyAgent or planner (a run folder or checkpoint) fly, live in a window (like RL-Zoo's
     enjoy); without a display, env 0's first episode is written as a GIF instead."""
@@ -458,6 +477,7 @@ def study():
 @SETS
 @ARCH
 @THREADS
+@REPRODUCIBLE
 def study_run(config_path, space_path, trials, storage, workers, name, root, resume, objective, seed, startup_trials,
               prune, prune_startup, prune_warmup, max_retry, heartbeat, quiet, worker, slot, sets, arch, threads):
     """Tune any config keys with Optuna (TPE, median pruning); the study survives crashes and spreads over
@@ -539,6 +559,7 @@ BUDGET = click.option("--budget", type=click.Choice(["local", "thesis"]), defaul
 @click.option("--slot", type=click.IntRange(min=0), default=0, hidden=True)
 @ARCH
 @THREADS
+@REPRODUCIBLE
 def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbeat, only, rerun, worker, slot, arch,
                    threads):
     """Train and evaluate every (condition, seed) of SPEC; run it again to continue after a crash (finished runs
@@ -696,6 +717,41 @@ def bench_env(env_counts, drones, fire_percentages, policies, min_env_steps, jso
     report = b.env_speed(counts, drones, pcts, pols, min_env_steps=min_env_steps,
                          on_row=lambda r: click.echo(b.format_env_row(r), err=True))
     click.echo(b.format_env_speed(report))
+    if json_path:
+        Path(json_path).write_text(json.dumps(report, indent=1))
+
+
+@bench.command("train")
+@click.option("--families", default="E1,E6,TD3,planner", show_default=True, callback=_name_list,
+              help="Recipe families: E1 (simple FlyAgent, PPO), E6 (collision FlyAgent, PPO), TD3, planner (P3, "
+                   "interval 5); each is its condition of the thesis spec.")
+@click.option("--modes", default="reproducible,vendor", show_default=True, callback=_name_list,
+              help="Torch kernels: reproducible (the same on every CPU; the default of train) and/or vendor "
+                   "(--no-reproducible).")
+@click.option("--updates", type=click.IntRange(min=1), default=2, show_default=True,
+              help="Timed updates per slice, after one untimed warm-up update.")
+@click.option("--rounds", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Times each slice runs (interleaved); the summary takes medians.")
+@click.option("--against", type=click.Path(file_okay=False, exists=True), default=None,
+              help="Another checkout (say, a git worktree of an older commit) timed with the same slices in the "
+                   "same run.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None)
+@click.option("--threads", type=click.IntRange(min=1), default=1, show_default=True, callback=_check_threads,
+              help="CPU threads of Taichi and torch in each slice (the experiment runner's --threads 1).")
+def bench_train(families, modes, updates, rounds, against, json_path, threads):
+    """Training speed: a fixed slice of each recipe family (env-steps/s all told, the split into collection,
+    update and the rest, the periodic evaluation's cost, peak memory), in each torch mode."""
+    from roshan.tools import train_bench as tb
+
+    bad = [f for f in families if f not in tb.FAMILIES] + [m for m in modes if m not in tb.MODES]
+    if bad:
+        _fail(ValueError(f"bench train: unknown {bad}; families: {', '.join(tb.FAMILIES)}; modes: "
+                         f"{', '.join(tb.MODES)}"))
+    click.echo(tb.HEADER, err=True)
+    with reported(RuntimeError):
+        report = tb.bench_training(families, modes, updates, rounds, Path(against) if against else None,
+                                   threads=threads, on_row=lambda r: click.echo(tb.format_row(r), err=True))
+    click.echo("\n".join(tb.ratios(report)))
     if json_path:
         Path(json_path).write_text(json.dumps(report, indent=1))
 

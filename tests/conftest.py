@@ -2,11 +2,17 @@
 
 import os
 
-import numpy as np
-import pytest
-import torch
+from roshan import reproducible
 
-from roshan.runtime import init_taichi, reset_taichi
+# The suite runs torch in the reproducible mode, as `roshan train` and `roshan eval` do by default: every pin that
+# goes through a network holds on Intel and AMD alike. Set before torch loads (roshan/reproducible.py says why).
+reproducible.enable()
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+import torch  # noqa: E402
+
+from roshan.runtime import init_taichi, reset_taichi  # noqa: E402
 
 # One torch thread, here and in the subprocesses tests start. The tests' batches are tiny (a few drones), so a second
 # thread gains nothing, and torch's OpenMP threads spin after each op on the cores Taichi's kernels need next: with

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from roshan import reproducible
 from roshan.experiment.findings import findings_markdown
 from roshan.experiment.runner import RESULT_ATTR, experiment_dir, load_experiment, progress, run_key, spec_storage
 from roshan.experiment.spec import Condition, Reference, Spec, load_spec
@@ -72,6 +73,7 @@ def condition_rows(spec: Spec, results: dict[str, dict]) -> list[dict]:
                     row[key] = _figures(have)
                     row[f"{key}_seeds"] = len(have)
             row["commits"] = commits(done)
+            row["machines"] = machines(done)
             row["minutes"] = float(sum(r.get("minutes", 0.0) for r in done))
             row["episodes"] = int(sum(r["episodes"] for r in done))
         rows.append(row)
@@ -86,6 +88,25 @@ def commits(done: list[dict]) -> list[str]:
         c = (code.get("commit") or "?")[:7] + ("+" if code.get("dirty") else "")
         if c not in out:
             out.append(c)
+    return out
+
+
+def made_on(result: dict) -> list[str]:
+    """The machines that trained and evaluated a run, in order ('?' for a run finished before results recorded
+    them: those recorded only the host name)."""
+    out: list[str] = []
+    for m in [*result.get("trained_on", []), *([result["machine"]] if "machine" in result else [])]:
+        label = reproducible.label(m)
+        if label not in out:
+            out.append(label)
+    return out or ["?"]
+
+
+def machines(done: list[dict]) -> list[str]:
+    """The machines that made a row's seeds."""
+    out: list[str] = []
+    for r in done:
+        out += [m for m in made_on(r) if m not in out]
     return out
 
 
@@ -141,13 +162,15 @@ def markdown(spec: Spec, rows: list[dict], results: dict[str, dict] | None = Non
            "the last weights; *objective*: the best training-objective checkpoint, the thesis's rule ('-': recorded "
            "for no seed; '[k of n]': over the k seeds that have it, runs made before it was evaluated have none). "
            "*code*: the commit each row's seeds ran ('mixed' when they differ, '+' uncommitted changes, '?' a run "
-           "finished before results recorded their commit).", "",
-           "| condition | seeds | code | metric | ours: best | last | objective | thesis |",
-           "|---|---|---|---|---|---|---|---|"]
+           "finished before results recorded their commit). *machine*: the CPUs that trained and evaluated the seeds, "
+           "with the kernels' instruction set where torch ran outside the reproducible mode ('?': a run finished "
+           "before results recorded its machine).", "",
+           "| condition | seeds | code | machine | metric | ours: best | last | objective | thesis |",
+           "|---|---|---|---|---|---|---|---|---|"]
     for cond, row in zip(spec.conditions, rows, strict=True):
         seeds = f"{row['seeds']}/{row['planned']}"
         if not row["seeds"]:
-            out.append(f"| {cond.name} | {seeds} | | - | not run yet | | | - |")
+            out.append(f"| {cond.name} | {seeds} | | | - | not run yet | | | - |")
             continue
         metrics = _shown_rates(cond, row) + (["tte"] if row.get("tte") is not None else [])
         for i, m in enumerate(metrics):
@@ -156,8 +179,9 @@ def markdown(spec: Spec, rows: list[dict], results: dict[str, dict] | None = Non
             ref = str(cond.thesis[m]) if m in cond.thesis else "-"
             label = "TTE (steps)" if m == "tte" else f"{m} %"
             first = i == 0
+            machine = "; ".join(row["machines"]) if first else ""
             out.append(f"| {cond.name if first else ''} | {seeds if first else ''} | {_code(row) if first else ''} "
-                       f"| {label} | {' | '.join(cells)} | {ref} |")
+                       f"| {machine} | {label} | {' | '.join(cells)} | {ref} |")
     out += ["", compute_line(spec, rows)]
     text = "\n".join(out) + "\n"
     if results is not None and spec.findings:
@@ -171,8 +195,8 @@ def per_seed_csv(spec: Spec, results: dict[str, dict]) -> str:
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["condition", "seed", "episodes", *[f"{m}_pct" for m in RATES], "tte_mean", "tte_median",
-                "last_success_pct", "objective_success_pct", "updates", "env_steps", "train_minutes", "minutes", "host",
-                "commit"])
+                "last_success_pct", "objective_success_pct", "updates", "env_steps", "train_minutes", "minutes",
+                "machine", "commit"])
     for run in spec.runs():
         r = results.get(run.key)
         if r is None:
@@ -185,7 +209,7 @@ def per_seed_csv(spec: Spec, results: dict[str, dict]) -> str:
                     f"{100 * r['objective']['success_rate']:.2f}" if "objective" in r else "",
                     train.get("updates", ""), train.get("env_steps", ""),
                     f"{train['seconds'] / 60:.2f}" if "seconds" in train else "", f"{r.get('minutes', 0):.2f}",
-                    r.get("host", ""), commits([r])[0]])
+                    "; ".join(made_on(r)), commits([r])[0]])
     return buf.getvalue()
 
 

@@ -34,6 +34,7 @@ from optuna.exceptions import UpdateFinishedTrialError
 from optuna.storages._heartbeat import get_heartbeat_thread
 from optuna.trial import TrialState
 
+from roshan import reproducible
 from roshan.algos.frozen import load_agent, policy_fn
 from roshan.checkpoints import checkpoint_path
 from roshan.config import Config, dump_config
@@ -326,8 +327,8 @@ def execute_run(run: Run, folder: Path, extra: tuple[str, ...] = (), progress_ba
         "failure_rates": summary["failure_rates"], "tte": summary["tte"],
         "tte_episodes": [int(t) for t in episodes["time"]],
         "train": {k: trained[k] for k in ("updates", "env_steps", "seconds") if k in trained},
-        "minutes": round((time.time() - start) / 60.0, 3), "host": socket.gethostname(), "run_dir": str(folder),
-        "code": provenance["code"],
+        "minutes": round((time.time() - start) / 60.0, 3), "run_dir": str(folder), "code": provenance["code"],
+        "machine": reproducible.machine(), "trained_on": trained.get("machines", []),
     }
     result.update(others)
     with writing("the run's result", folder / "result.json"):

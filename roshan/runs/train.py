@@ -20,6 +20,7 @@ import torch
 from torch.utils.tensorboard import SummaryWriter
 from tqdm import tqdm
 
+from roshan import reproducible
 from roshan.algos.agents import make_agent
 from roshan.algos.frozen import policy_fn
 from roshan.checkpoints import (
@@ -81,6 +82,7 @@ class Trainer:
         self.progress = Progress()
         self.episodes = EpisodeLog(window=tc.objective_window)
         self.saved_update: int | None = None  # the update of the last latest.pt this process knows is whole
+        self.machines: list[dict] = []  # what trained each stretch of the run (reproducible.machine, from_update)
         if resume_state is not None:
             self._restore(resume_state)
             self.saved_update = self.progress.updates
@@ -147,12 +149,14 @@ class Trainer:
         self.generator.set_state(state["rng"]["generator"])
         torch.set_rng_state(state["rng"]["torch"])
         np.random.set_state(state["rng"]["numpy"])
+        self.machines = list(state.get("machines", []))  # checkpoints before provenance have none
 
     def state_dict(self) -> dict:
         return {"algo": self.cfg.train.algo, "config": config_dict(self.cfg), "agent": self.agent.state_dict(),
                 "progress": self.progress.state_dict(), "episodes": self.episodes.state_dict(),
                 "rng": {"generator": self.generator.get_state(), "torch": torch.get_rng_state(),
-                        "numpy": np.random.get_state()}}
+                        "numpy": np.random.get_state()},
+                "machines": self.machines}
 
     # ------------------------------------------------------------------------------------------ budget
 
@@ -183,6 +187,7 @@ class Trainer:
         """Train until the budget is spent. A write that fails (full disk, read-only folder) stops the run with a
         :class:`TrainingStopped` that says what could not be written and how to resume: the checkpoints are
         written atomically, so the last good one is whole."""
+        self._note_machine()
         bar = self._bar()
         try:
             while not self.done():
@@ -202,6 +207,14 @@ class Trainer:
             with contextlib.suppress(OSError):  # after a failure: the events written so far stay, nothing more can
                 self.writer.close()
         return self.progress
+
+    def _note_machine(self) -> None:
+        """Record the machine (CPU, torch kernels, mode) that trains from here, unless it trained the last stretch:
+        a run resumed elsewhere, or outside the reproducible mode, says so in its result."""
+        here = reproducible.machine()
+        last = self.machines[-1] if self.machines else None
+        if last is None or {k: v for k, v in last.items() if k != "from_update"} != here:
+            self.machines.append({**here, "from_update": self.progress.updates})
 
     def _update(self, bar) -> None:
         """One update: collect and learn, log, evaluate now and then, checkpoint."""
@@ -298,8 +311,7 @@ def train(cfg: Config, run_dir: Path, resume: bool = False, progress_bar: bool =
     (``best_eval`` if periodic evaluation ran, else ``best_objective``) on episodes other than the periodic
     evaluation's, which chose it. Returns the evaluation summary plus the run's counters."""
     ensure_taichi_for(cfg)
-    if cfg.train.torch_threads:
-        torch.set_num_threads(cfg.train.torch_threads)
+    torch.set_num_threads(reproducible.torch_threads(cfg.train.torch_threads))
     prepare_output(Path(run_dir) / "checkpoints", "checkpoints")  # a read-only run folder fails before training
     with run_lock(run_dir):  # taken before anything is written: a refused process changes nothing
         state, path = resume_state(run_dir, cfg) if resume else (None, None)
@@ -309,7 +321,7 @@ def train(cfg: Config, run_dir: Path, resume: bool = False, progress_bar: bool =
                 dump_config(cfg, Path(run_dir) / "config.yaml")
         progress = trainer.run()
     result = {"run_dir": str(run_dir), **progress.state_dict(), "train_episodes": trainer.episodes.episodes,
-              "stopped_by": trainer.stopped_by}
+              "stopped_by": trainer.stopped_by, "machines": trainer.machines}
     if evaluate_at_end:
         # the run's own evaluation sits in RUN/eval itself (a resume re-evaluates and replaces it); `roshan eval`
         # writes named folders next to it

@@ -89,7 +89,7 @@ def write_trials_csv(study: optuna.Study, path: Path) -> None:
 
     trials = study.get_trials(deepcopy=False)
     keys = list(dict.fromkeys(k for t in trials for k in t.params))
-    attrs = ["success_rate", "reward", "tte", "updates", "minutes", "host", "run_dir"]
+    attrs = ["success_rate", "reward", "tte", "updates", "minutes", "machine", "host", "run_dir"]
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["number", "state", "value", *attrs, *keys, "retry_of"])

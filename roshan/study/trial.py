@@ -17,6 +17,7 @@ from typing import Any
 import optuna
 from optuna.trial import TrialState
 
+from roshan import reproducible
 from roshan.config import Config
 from roshan.runs.resume import start_run
 from roshan.runs.train import train
@@ -97,6 +98,7 @@ def make_objective(recipe: Recipe, root: str | Path, name: str, slot: int = 0, l
             trial.set_user_attr(key, objective_value(ev, "success" if key == "success_rate" else key))
         trial.set_user_attr("updates", result["updates"])
         trial.set_user_attr("minutes", round(result["seconds"] / 60.0, 3))
+        trial.set_user_attr("machine", "; ".join(reproducible.label(m) for m in result["machines"]))
         return objective_value(ev, recipe.objective)
 
     return objective

@@ -182,7 +182,9 @@ def fake_result(run) -> dict:
     return {"run": run.key, "condition": run.condition.name, "seed": run.seed, "episodes": 4, "eval_seed": 9,
             "success_rate": 0.25 * (run.seed % 5), "failure_rates": {"timeout": 1 - 0.25 * (run.seed % 5)},
             "tte": {}, "tte_episodes": [100 + run.seed, 200], "minutes": 0.0,
-            "code": {"version": "0.1", "commit": "abcdef0123456789", "dirty": False}}
+            "code": {"version": "0.1", "commit": "abcdef0123456789", "dirty": False},
+            "machine": {"cpu": "AMD EPYC", "torch": "2.13.0+cpu", "isa": "AVX2", "torch_threads": 1,
+                        "mode": "reproducible"}}
 
 
 def recording_execute(log: Path, pause: float = 0.0):
@@ -457,8 +459,9 @@ def test_report_is_mean_std_median_over_seeds_beside_the_thesis(tmp_path):
     assert rows["greedy"]["seeds"] == 0 and rows["fast"]["seeds"] == 2
     assert rate(results["fast/seed_1"], "success") == 25.0
     table = markdown(spec, list(rows.values()))
-    assert "| fast | 2/2 | abcdef0 | success % | 12.5 ± 12.5 (12.5) | - | - | 91.15 ± 17.46 (100) |" in table
-    assert "| greedy | 0/1 | | - | not run yet | | | - |" in table
+    assert ("| fast | 2/2 | abcdef0 | AMD EPYC | success % | 12.5 ± 12.5 (12.5) | - | - | 91.15 ± 17.46 (100) |"
+            in table)
+    assert "| greedy | 0/1 | | | - | not run yet | | | - |" in table
     assert "collision %" not in table.split("| more_seeds")[0]  # fast never collided: no collision row
 
 
@@ -470,11 +473,17 @@ def test_report_shows_last_and_objective_weights_and_which_code_made_each_row(tm
                      "tte_episodes": [300, 400]}
     results["fast/seed_0"]["objective"] = results["fast/seed_0"]["last"]
     results["fast/seed_1"]["code"] = {"commit": "1234567890", "dirty": True}
+    # seed 1 trained on a Xeon outside the mode, then was evaluated on the EPYC
+    results["fast/seed_1"]["trained_on"] = [{"cpu": "Intel Xeon", "isa": "AVX512", "mode": "vendor", "from_update": 0}]
     table = markdown(spec, condition_rows(spec, results))
-    assert ("| fast | 2/2 | mixed: abcdef0, 1234567+ | success % | 12.5 ± 12.5 (12.5) | 50.0 ± 0.0 (50.0) "
-            "| 50.0 ± 0.0 (50.0) [1 of 2] | 91.15 ± 17.46 (100) |") in table  # the objective: seed 0's alone
-    assert "|  |  |  | TTE (steps) | 150 ± 50 (150) | 350 ± 50 (350) | 350 ± 50 (350) [1 of 2] | - |" in table
-    assert "fast,0,4,0.00,0.00,0.00,100.00,0.00,150.0,150.0,50.00,50.00,,,,0.00,,abcdef0" in per_seed_csv(spec, results)
+    assert ("| fast | 2/2 | mixed: abcdef0, 1234567+ | AMD EPYC; Intel Xeon (AVX512, vendor kernels) | success % "
+            "| 12.5 ± 12.5 (12.5) | 50.0 ± 0.0 (50.0) | 50.0 ± 0.0 (50.0) [1 of 2] | 91.15 ± 17.46 (100) |") in table
+    assert "|  |  |  |  | TTE (steps) | 150 ± 50 (150) | 350 ± 50 (350) | 350 ± 50 (350) [1 of 2] | - |" in table
+    rows = per_seed_csv(spec, results)
+    assert "fast,0,4,0.00,0.00,0.00,100.00,0.00,150.0,150.0,50.00,50.00,,,,0.00,AMD EPYC,abcdef0" in rows
+    assert ',"Intel Xeon (AVX512, vendor kernels); AMD EPYC",1234567+' in rows
+    del results["fast/seed_1"]["machine"], results["fast/seed_1"]["trained_on"]  # a run from before: the host only
+    assert "| AMD EPYC; ? |" in markdown(spec, condition_rows(spec, results))
     del results["fast/seed_0"]["objective"]  # no seed has it: no figure
     assert "| 50.0 ± 0.0 (50.0) | - | 91.15 ± 17.46 (100) |" in markdown(spec, condition_rows(spec, results))
 
@@ -592,7 +601,9 @@ conditions:
                          capture_output=True, text=True, timeout=300, cwd=REPO)
     assert rep.returncode == 0, rep.stderr[-3000:]
     assert "1/1 runs done" in rep.stdout
-    assert re.search(r"\| simple \| 1/1 \| [0-9a-f]{7}\+? \| success % \|", rep.stdout)  # with its commit
+    # with its commit and its machine (the runner's worker trained in the reproducible mode)
+    assert re.search(r"\| simple \| 1/1 \| [0-9a-f]{7}\+? \| [^|(]+ \| success % \|", rep.stdout), rep.stdout
+    assert [m["mode"] for m in result["trained_on"]] == ["reproducible"] and result["machine"]["isa"] == "AVX2"
     report = tmp_path / "runs" / "tiny" / "report"
     assert (report / "success.png").stat().st_size > 0
     assert (report / "runs" / "simple" / "seed_0.json").is_file()

@@ -1,0 +1,182 @@
+"""``roshan bench train``: a fixed slice of each recipe family's training, timed the way a run spends it.
+
+Each slice is a condition of an experiment spec (by default the thesis's), trained by the real :class:`Trainer`
+for a warm-up update (kernel compilation, first allocations: not timed) and then ``updates`` timed ones, with
+checkpoints and TensorBoard as a run writes them; then one periodic evaluation of the condition's size. Reported:
+env-steps per second all told (planner: decisions), its split into collection, update and the rest (logging and
+checkpoints), the evaluation's seconds (its second call: the first compiles) and its share of a run at the condition's ``train.eval_every``, and the
+process's peak memory.
+
+Every slice runs in a process of its own, started with the torch settings of its mode (they must be set before
+torch loads, :mod:`roshan.reproducible`); ``--against DIR`` times the same slices with another checkout's code in
+the same run, one after the other in each round, so that the ratios compare like with like. This file runs as a
+script inside those processes and imports only what a checkout from before it also has (the spec, the Trainer).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+# family -> (condition of the thesis spec, what one env step is called)
+FAMILIES = {"E1": ("E1_ppo", "env-steps"), "E6": ("E6", "env-steps"), "TD3": ("E1_td3", "env-steps"),
+            "planner": ("P3_h9600_i5", "decisions")}
+MODES = ("reproducible", "vendor")
+
+
+class Stopwatch:
+    """Seconds spent inside a wrapped method, counted from :meth:`start`."""
+
+    def __init__(self, owner, name: str):
+        self.seconds, self.on = 0.0, False
+        inner = getattr(owner, name)
+
+        def timed(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return inner(*args, **kwargs)
+            finally:
+                if self.on:
+                    self.seconds += time.perf_counter() - t0
+
+        setattr(owner, name, timed)
+
+    def start(self) -> None:
+        self.seconds, self.on = 0.0, True
+
+
+def time_slice(spec_path: str, condition: str, updates: int, seed: int = 0) -> dict:
+    """Train ``condition`` of the spec for 1 + ``updates`` updates in a scratch folder and time the last
+    ``updates`` of them, then one periodic evaluation."""
+    from roshan.experiment.spec import load_spec
+    from roshan.runs.train import Trainer
+
+    cond = load_spec(spec_path).condition(condition)
+    budget = (f"train.max_updates={updates + 1}", "train.max_minutes=0", "train.total_steps=0", "train.eval_every=0")
+    cfg = cond.run_config(seed, budget)
+    marks: list[tuple[float, int]] = []
+    with tempfile.TemporaryDirectory() as folder:
+        trainer = Trainer(cfg, Path(folder), progress_bar=False,
+                          on_update=lambda m: marks.append((time.perf_counter(), m["env_steps"])))
+        learner = trainer.learner
+        update = Stopwatch(trainer.agent, "update")
+        collector = getattr(learner, "collector", None)
+        collect = None
+        if collector is not None:
+            collect = Stopwatch(collector, "collect" if hasattr(collector, "collect") else "step")
+
+        def after_warmup(m, first=trainer.on_update):
+            first(m)
+            if len(marks) == 1:
+                update.start()
+                if collect is not None:
+                    collect.start()
+
+        trainer.on_update = after_warmup
+        trainer.run()
+        (t0, s0), (t1, s1) = marks[0], marks[-1]
+        seconds = t1 - t0
+        trainer._periodic_eval()  # builds and compiles the evaluation env
+        t = time.perf_counter()
+        trainer._periodic_eval()
+        eval_seconds = time.perf_counter() - t
+    collect_s = collect.seconds if collect is not None else 0.0
+    every = cond.run_config(seed).train.eval_every
+    per_update = seconds / updates
+    return {"condition": condition, "updates": updates, "env_steps": s1 - s0, "seconds": seconds,
+            "steps_per_s": (s1 - s0) / seconds, "collect_s": collect_s, "update_s": update.seconds,
+            "other_s": seconds - collect_s - update.seconds, "eval_s": eval_seconds,
+            "eval_share": eval_seconds / (eval_seconds + every * per_update) if every else 0.0,
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
+
+
+def run_slice(checkout: Path, spec: str, condition: str, updates: int, mode: str, threads: int | None) -> dict:
+    """One slice in a fresh process of ``checkout``'s code, with the torch settings of ``mode``."""
+    from roshan import reproducible
+
+    env = {k: v for k, v in os.environ.items() if k not in reproducible.SETTINGS}
+    env[reproducible.ENV_VAR] = "1" if mode == MODES[0] else "0"
+    if mode == MODES[0]:
+        env.update(reproducible.SETTINGS)
+    env["PYTHONPATH"] = str(checkout)
+    args = [sys.executable, str(Path(__file__).resolve()), str(checkout / spec), condition, str(updates),
+            str(threads or 0)]
+    done = subprocess.run(args, cwd=checkout, env=env, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"bench train: {condition} ({mode}, {checkout}) failed:\n{done.stderr[-3000:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def bench_training(families: list[str], modes: list[str], updates: int, rounds: int = 1,
+                   against: Path | None = None, spec: str = "configs/experiments/thesis.yaml",
+                   threads: int | None = 1, on_row=None) -> dict:
+    """Each family's slice in each mode (and with ``against``'s code), ``rounds`` times, interleaved."""
+    here = Path(__file__).resolve().parents[2]
+    checkouts = [("this", here)] + ([("against", Path(against).resolve())] if against is not None else [])
+    rows = []
+    for r in range(rounds):
+        for family in families:
+            condition, unit = FAMILIES[family]
+            for mode in modes:
+                for name, checkout in checkouts:
+                    row = {"family": family, "unit": unit, "mode": mode, "code": name, "round": r,
+                           **run_slice(checkout, spec, condition, updates, mode, threads)}
+                    rows.append(row)
+                    if on_row is not None:
+                        on_row(row)
+    return {"threads": threads, "updates": updates, "rounds": rounds, "spec": spec, "rows": rows,
+            "against": str(against) if against is not None else None}
+
+
+HEADER = (f"{'family':<8}{'mode':<13}{'code':<8}{'steps/s':>10}{'collect s':>11}{'update s':>10}{'other s':>9}"
+          f"{'eval s':>8}{'eval %':>8}{'peak MB':>9}")
+
+
+def format_row(r: dict) -> str:
+    return (f"{r['family']:<8}{r['mode']:<13}{r['code']:<8}{r['steps_per_s']:>10,.0f}{r['collect_s']:>11.2f}"
+            f"{r['update_s']:>10.2f}{r['other_s']:>9.2f}{r['eval_s']:>8.1f}{100 * r['eval_share']:>7.1f}%"
+            f"{r['peak_rss_mb']:>9,.0f}")
+
+
+def ratios(report: dict) -> list[str]:
+    """Median steps/s of each family and variant, and each variant's ratio to this code's reproducible mode."""
+    import statistics
+
+    by: dict[tuple[str, str, str], list[float]] = {}
+    for r in report["rows"]:
+        by.setdefault((r["family"], r["mode"], r["code"]), []).append(r["steps_per_s"])
+    lines = []
+    for family in dict.fromkeys(r["family"] for r in report["rows"]):
+        base = by.get((family, MODES[0], "this"))
+        for (f, mode, code), values in by.items():
+            if f != family:
+                continue
+            med = statistics.median(values)
+            ratio = f"{med / statistics.median(base):.2f}x" if base else "-"
+            lines.append(f"{family:<8}{mode:<13}{code:<8}{med:>10,.0f} steps/s (median of {len(values)}), "
+                         f"{ratio} this code's reproducible mode")
+    return lines
+
+
+def _main(argv: list[str]) -> None:
+    spec, condition, updates, threads = argv[0], argv[1], int(argv[2]), int(argv[3])
+    import torch
+
+    from roshan.runtime import init_taichi
+
+    if threads:
+        torch.set_num_threads(threads)
+    init_taichi("cpu", threads or None)
+    row = time_slice(spec, condition, updates)
+    row["isa"] = str(torch.backends.cpu.get_cpu_capability())
+    print(json.dumps(row))
+
+
+if __name__ == "__main__":
+    _main(sys.argv[1:])
