@@ -4,8 +4,8 @@ Each slice is a condition of an experiment spec (by default the thesis's), train
 for a warm-up update (kernel compilation, first allocations: not timed) and then ``updates`` timed ones, with
 checkpoints and TensorBoard as a run writes them; then one periodic evaluation of the condition's size. Reported:
 env-steps per second all told (planner: decisions), its split into collection, update and the rest (logging and
-checkpoints), the evaluation's seconds (its second call: the first compiles) and its share of a run at the condition's ``train.eval_every``, and the
-process's peak memory.
+checkpoints), the evaluation's seconds (its second call: the first compiles) and its share of a run at the
+condition's ``train.eval_every``, and the process's peak memory.
 
 Every slice runs in a process of its own, started with the torch settings of its mode (they must be set before
 torch loads, :mod:`roshan.reproducible`); ``--against DIR`` times the same slices with another checkout's code in
