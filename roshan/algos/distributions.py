@@ -56,7 +56,12 @@ class ClippedGaussian:
 
 
 # Gauss-Hermite nodes and weights for E[f(Z)], Z ~ N(0, 1): sqrt(2) x_i and w_i / sqrt(pi) of the 5-point rule.
-_GH_X, _GH_W = np.polynomial.hermite.hermgauss(5)
+# Written out (numpy.polynomial.hermite.hermgauss(5), to the last bit), not computed at import: numpy finds them with
+# its LAPACK, whose kernels are chosen by CPU, and training must not depend on which CPU imported this module
+# (roshan/reproducible.py). tests/algos pin them against hermgauss.
+_GH_X = np.array([-2.0201828704560856, -0.9585724646138185, 0.0, 0.9585724646138185, 2.0201828704560856])
+_GH_W = np.array([0.019953242059045917, 0.3936193231522411, 0.9453087204829418, 0.3936193231522411,
+                  0.019953242059045917])
 _GH_NODES = torch.tensor(_GH_X * math.sqrt(2.0), dtype=torch.float32)
 _GH_WEIGHTS = torch.tensor(_GH_W / math.sqrt(math.pi), dtype=torch.float32)
 

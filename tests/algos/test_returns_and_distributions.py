@@ -98,3 +98,18 @@ def test_squashed_entropy_pulls_a_saturated_mean_back_where_the_base_entropy_doe
     d.squashed_entropy().sum().backward()
     assert mu.grad[0, 0] < 0 < mu.grad[0, 1]  # ascending the bonus moves both means towards 0
     assert not d.entropy().requires_grad  # the base entropy does not depend on the mean at all
+
+
+def test_the_written_out_gauss_hermite_rule_is_numpys_and_integrates_polynomials_exactly():
+    """The 5-node rule is written out (numpy's LAPACK would compute it with CPU-chosen kernels at import): it must be
+    numpy's rule, and integrate E[Z^k] of a standard normal exactly up to degree 9."""
+    import numpy as np
+
+    from roshan.algos import distributions as d
+
+    x, w = np.polynomial.hermite.hermgauss(5)
+    np.testing.assert_allclose(d._GH_X, x, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(d._GH_W, w, rtol=0, atol=1e-15)
+    nodes, weights = d._GH_X * math.sqrt(2.0), d._GH_W / math.sqrt(math.pi)
+    for k, moment in enumerate([1, 0, 1, 0, 3, 0, 15, 0, 105, 0]):
+        assert float(np.sum(weights * nodes ** k)) == pytest.approx(moment, abs=1e-12)
