@@ -1,7 +1,8 @@
 """Import layers of roshan: which modules may import which, read from the source with ``ast`` (nothing is imported).
 
 Layers, lowest first: base modules (config, maps, runtime, episode, checkpoints, io, allocator, ggui, memory,
-taichi_patches) import no other layer; ``kernels`` (Taichi) imports only base; ``algos`` (torch) imports only base;
+taichi_patches, reproducible) import no other layer; ``kernels`` (Taichi) imports only base; ``algos`` (torch)
+imports only base;
 ``env`` imports base, kernels and, of the algos, only ``roshan.algos.frozen`` (the planner's frozen fly policy);
 ``runs``, ``study``, ``tools`` and ``cli`` sit on top. No two roshan modules may import each other, directly or
 round a longer cycle, and roshan imports sit at the top of a module, except in ``roshan/cli.py``, which imports its
@@ -18,7 +19,7 @@ REPO = Path(__file__).resolve().parents[1]
 PACKAGE = "roshan"
 
 BASE = ("roshan.config", "roshan.maps", "roshan.runtime", "roshan.episode", "roshan.checkpoints", "roshan.io",
-        "roshan.allocator", "roshan.ggui", "roshan.memory", "roshan.taichi_patches")
+        "roshan.allocator", "roshan.ggui", "roshan.memory", "roshan.taichi_patches", "roshan.reproducible")
 UPPER = ("roshan.runs", "roshan.study", "roshan.experiment", "roshan.tools", "roshan.cli")
 # (modules under these prefixes, may not import these prefixes, except these modules)
 RULES = (

@@ -10,19 +10,21 @@ condition's ``train.eval_every``, and the process's peak memory.
 Every slice runs in a process of its own, started with the torch settings of its mode (they must be set before
 torch loads, :mod:`roshan.reproducible`); ``--against DIR`` times the same slices with another checkout's code in
 the same run, one after the other in each round, so that the ratios compare like with like. This file runs as a
-script inside those processes and imports only what a checkout from before it also has (the spec, the Trainer).
+script, roshan/tools/train_slice.py, inside those processes; it imports only what a checkout from before it also
+has (the spec, the Trainer).
 """
 
 from __future__ import annotations
 
 import json
 import os
-import resource
+import statistics
 import subprocess
 import sys
-import tempfile
-import time
 from pathlib import Path
+
+from roshan import reproducible
+from roshan.tools import train_slice
 
 # family -> (condition of the thesis spec, what one env step is called)
 FAMILIES = {"E1": ("E1_ppo", "env-steps"), "E6": ("E6", "env-steps"), "TD3": ("E1_td3", "env-steps"),
@@ -30,82 +32,14 @@ FAMILIES = {"E1": ("E1_ppo", "env-steps"), "E6": ("E6", "env-steps"), "TD3": ("E
 MODES = ("reproducible", "vendor")
 
 
-class Stopwatch:
-    """Seconds spent inside a wrapped method, counted from :meth:`start`."""
-
-    def __init__(self, owner, name: str):
-        self.seconds, self.on = 0.0, False
-        inner = getattr(owner, name)
-
-        def timed(*args, **kwargs):
-            t0 = time.perf_counter()
-            try:
-                return inner(*args, **kwargs)
-            finally:
-                if self.on:
-                    self.seconds += time.perf_counter() - t0
-
-        setattr(owner, name, timed)
-
-    def start(self) -> None:
-        self.seconds, self.on = 0.0, True
-
-
-def time_slice(spec_path: str, condition: str, updates: int, seed: int = 0) -> dict:
-    """Train ``condition`` of the spec for 1 + ``updates`` updates in a scratch folder and time the last
-    ``updates`` of them, then one periodic evaluation."""
-    from roshan.experiment.spec import load_spec
-    from roshan.runs.train import Trainer
-
-    cond = load_spec(spec_path).condition(condition)
-    budget = (f"train.max_updates={updates + 1}", "train.max_minutes=0", "train.total_steps=0", "train.eval_every=0")
-    cfg = cond.run_config(seed, budget)
-    marks: list[tuple[float, int]] = []
-    with tempfile.TemporaryDirectory() as folder:
-        trainer = Trainer(cfg, Path(folder), progress_bar=False,
-                          on_update=lambda m: marks.append((time.perf_counter(), m["env_steps"])))
-        learner = trainer.learner
-        update = Stopwatch(trainer.agent, "update")
-        collector = getattr(learner, "collector", None)
-        collect = None
-        if collector is not None:
-            collect = Stopwatch(collector, "collect" if hasattr(collector, "collect") else "step")
-
-        def after_warmup(m, first=trainer.on_update):
-            first(m)
-            if len(marks) == 1:
-                update.start()
-                if collect is not None:
-                    collect.start()
-
-        trainer.on_update = after_warmup
-        trainer.run()
-        (t0, s0), (t1, s1) = marks[0], marks[-1]
-        seconds = t1 - t0
-        trainer._periodic_eval()  # builds and compiles the evaluation env
-        t = time.perf_counter()
-        trainer._periodic_eval()
-        eval_seconds = time.perf_counter() - t
-    collect_s = collect.seconds if collect is not None else 0.0
-    every = cond.run_config(seed).train.eval_every
-    per_update = seconds / updates
-    return {"condition": condition, "updates": updates, "env_steps": s1 - s0, "seconds": seconds,
-            "steps_per_s": (s1 - s0) / seconds, "collect_s": collect_s, "update_s": update.seconds,
-            "other_s": seconds - collect_s - update.seconds, "eval_s": eval_seconds,
-            "eval_share": eval_seconds / (eval_seconds + every * per_update) if every else 0.0,
-            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
-
-
 def run_slice(checkout: Path, spec: str, condition: str, updates: int, mode: str, threads: int | None) -> dict:
     """One slice in a fresh process of ``checkout``'s code, with the torch settings of ``mode``."""
-    from roshan import reproducible
-
     env = {k: v for k, v in os.environ.items() if k not in reproducible.SETTINGS}
     env[reproducible.ENV_VAR] = "1" if mode == MODES[0] else "0"
     if mode == MODES[0]:
         env.update(reproducible.SETTINGS)
     env["PYTHONPATH"] = str(checkout)
-    args = [sys.executable, str(Path(__file__).resolve()), str(checkout / spec), condition, str(updates),
+    args = [sys.executable, train_slice.__file__, str(checkout / spec), condition, str(updates),
             str(threads or 0)]
     done = subprocess.run(args, cwd=checkout, env=env, capture_output=True, text=True)
     if done.returncode != 0:
@@ -146,8 +80,6 @@ def format_row(r: dict) -> str:
 
 def ratios(report: dict) -> list[str]:
     """Median steps/s of each family and variant, and each variant's ratio to this code's reproducible mode."""
-    import statistics
-
     by: dict[tuple[str, str, str], list[float]] = {}
     for r in report["rows"]:
         by.setdefault((r["family"], r["mode"], r["code"]), []).append(r["steps_per_s"])
@@ -162,21 +94,3 @@ def ratios(report: dict) -> list[str]:
             lines.append(f"{family:<8}{mode:<13}{code:<8}{med:>10,.0f} steps/s (median of {len(values)}), "
                          f"{ratio} this code's reproducible mode")
     return lines
-
-
-def _main(argv: list[str]) -> None:
-    spec, condition, updates, threads = argv[0], argv[1], int(argv[2]), int(argv[3])
-    import torch
-
-    from roshan.runtime import init_taichi
-
-    if threads:
-        torch.set_num_threads(threads)
-    init_taichi("cpu", threads or None)
-    row = time_slice(spec, condition, updates)
-    row["isa"] = str(torch.backends.cpu.get_cpu_capability())
-    print(json.dumps(row))
-
-
-if __name__ == "__main__":
-    _main(sys.argv[1:])
