@@ -17,14 +17,17 @@ ifeq ($(origin PYTHON),undefined)
   endif
 endif
 PIP := $(PYTHON) -m pip
-# torch: plain `pip install torch==2.13.0` takes what the configured index has. On PyPI that is, for Linux, the CUDA
-# build (several GB with its nvidia-* wheels); TORCH_INDEX=https://download.pytorch.org/whl/cpu takes the small CPU
-# build from PyTorch's own index instead.
+# torch: scripts/install_torch.sh takes the CPU build on a machine without an NVIDIA GPU (from the configured index
+# when it serves one, else from PyTorch's CPU index) and what the configured index offers with one (on PyPI for
+# Linux, the CUDA build: several GB with its nvidia-* wheels); TORCH_INDEX=URL takes torch from that index. It says
+# in one line which; `make print-torch` shows the choice without installing.
 TORCH ?= torch==2.13.0
 TORCH_INDEX ?=
+NVIDIA_SMI ?= nvidia-smi
+TORCH_BUILD := $(if $(TORCH_INDEX),index,$(if $(shell command -v $(NVIDIA_SMI) 2>/dev/null),cuda,cpu))
 DEMO_DIR ?= out/demo
 
-INSTALL_KEY := $(shell (cat pyproject.toml; echo "$(CURDIR) $(TORCH) $(TORCH_INDEX)") | sha256sum | cut -c1-12)
+INSTALL_KEY := $(shell (cat pyproject.toml; echo "$(CURDIR) $(TORCH) $(TORCH_INDEX) $(TORCH_BUILD)") | sha256sum | cut -c1-12)
 # The stamp lives in the virtualenv it describes (a new venv has none); a Python outside any venv keeps it in build/.
 ifdef VENV
   STAMP_DIR := $(VENV)
@@ -33,7 +36,7 @@ else
 endif
 STAMP := $(STAMP_DIR)/.roshan-installed-$(INSTALL_KEY)
 
-.PHONY: install system-deps demo test test-fast lint bench-fire bench-fidelity clean print-python
+.PHONY: install system-deps demo test test-fast lint bench-fire bench-fidelity clean print-python print-torch
 
 install: $(STAMP)
 
@@ -41,7 +44,7 @@ $(STAMP):
 	@$(MAKE) --no-print-directory system-deps
 	@if [ -n "$(VENV)" ] && [ ! -x "$(PYTHON)" ]; then echo "python3 -m venv .venv"; python3 -m venv "$(VENV)"; fi
 	$(PIP) install -q --upgrade pip
-	$(PIP) install -q $(TORCH) $(if $(TORCH_INDEX),--index-url $(TORCH_INDEX))
+	@PYTHON="$(PYTHON)" TORCH="$(TORCH)" TORCH_INDEX="$(TORCH_INDEX)" NVIDIA_SMI="$(NVIDIA_SMI)" sh scripts/install_torch.sh
 	$(PIP) install -q -e ".[dev]"
 	@mkdir -p $(STAMP_DIR) && rm -f $(STAMP_DIR)/.roshan-installed-* && touch $@
 
@@ -104,3 +107,7 @@ clean:
 # Which interpreter and install stamp this make would use (tests/test_makefile.py).
 print-python:
 	@echo "$(PYTHON) $(STAMP)"
+
+# Which torch build `make install` would take: cpu (no NVIDIA GPU), cuda (nvidia-smi found) or index (TORCH_INDEX).
+print-torch:
+	@echo "torch: $(TORCH_BUILD) build of $(TORCH)$(if $(TORCH_INDEX), from $(TORCH_INDEX))"

@@ -374,6 +374,8 @@ def _echo_evaluation(summary: dict, title: str, baseline: str | None) -> None:
             click.echo(summary["baseline_note"])
     else:
         click.echo(format_table(summary, title))
+    if summary.get("note"):
+        click.echo(summary["note"])
 
 
 def _eval_maps(target, maps, episodes, seed, envs, which, out_dir, replace, baseline, quiet, sets, arch, threads):

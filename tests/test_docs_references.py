@@ -32,8 +32,11 @@ SELF = Path(__file__).resolve()
 
 
 def scanned_files() -> list[Path]:
-    """Where the model is cited: README.md, BENCHMARKS.md, configs/, roshan/, tests/, models/*/README.md."""
-    files = [ROOT / "README.md", ROOT / "BENCHMARKS.md", *sorted((ROOT / "models").glob("*/README.md"))]
+    """Where the model is cited: README.md, BENCHMARKS.md, CHANGELOG.md, docs/*.md, configs/, roshan/, tests/,
+    models/*/README.md."""
+    files = [ROOT / "README.md", ROOT / "BENCHMARKS.md", ROOT / "CHANGELOG.md",
+             *sorted((ROOT / "models").glob("*/README.md")),
+             *sorted(p for p in (ROOT / "docs").glob("*.md"))]
     for folder, patterns in (("configs", ("*.yaml", "*.yml", "*.md")), ("roshan", ("*.py", "*.md", "*.yaml")),
                              ("tests", ("*.py",))):
         for pattern in patterns:
@@ -102,7 +105,7 @@ def test_model_pages_exist_with_numbered_sections():
 def test_every_citation_resolves():
     found = []
     for path in scanned_files():
-        found += problems(path.read_text(encoding="utf-8"), str(path.relative_to(ROOT)))
+        found += problems(path.read_text(encoding="utf-8"), str(path.relative_to(ROOT)), base=path.parent)
     assert not found, "\n".join(found)
 
 

@@ -81,3 +81,59 @@ def test_the_demo_says_what_it_runs(venv):
     (line,) = [ln for ln in readme.splitlines() if ln.startswith("make demo")]
     assert "8 fires" not in readme and "8 episodes" in line
     assert "thesis setting" in readme and "planner.greedy_home: fixed" in readme
+
+
+def test_print_torch_names_the_build_from_the_machine(venv):
+    """No NVIDIA GPU: the CPU build; nvidia-smi found: the CUDA build; TORCH_INDEX: that index. `make install` hands
+    the same choice to scripts/install_torch.sh (make -n: nothing runs), and the choice is part of the stamp."""
+    env = base_env(venv / "bin")
+    assert make("print-torch", "NVIDIA_SMI=/nonexistent", env=env).stdout.strip() == "torch: cpu build of torch==2.13.0"
+    assert make("print-torch", "NVIDIA_SMI=true", env=env).stdout.strip() == "torch: cuda build of torch==2.13.0"
+    line = make("print-torch", "TORCH_INDEX=https://example.invalid/cpu", env=env).stdout.strip()
+    assert line == "torch: index build of torch==2.13.0 from https://example.invalid/cpu"
+    dry = make("-n", "install", "NVIDIA_SMI=/nonexistent", env=env).stdout
+    assert 'NVIDIA_SMI="/nonexistent" sh scripts/install_torch.sh' in dry
+    stamps = {make("print-python", f"NVIDIA_SMI={probe}", env=env).stdout.split()[1]
+              for probe in ("/nonexistent", "true")}
+    assert len(stamps) == 2  # a machine that gains a GPU installs again
+
+
+FAKE_PYTHON = """#!/bin/sh
+# python stand-in: records every pip call; a dry run reports $OFFERED; an install from --index-url fails if $DOWN.
+if [ "$1" = "-m" ] && [ "$2" = "pip" ]; then
+    shift 2
+    echo "pip $*" >> "$LOG"
+    case "$*" in
+        *--dry-run*) printf '{"install": [{"metadata": {"version": "%s"}}]}' "$OFFERED"; exit 0;;
+        *--index-url*) [ -z "$DOWN" ] || exit 1;;
+    esac
+    exit 0
+fi
+exec "$REAL" "$@"
+"""
+
+
+@pytest.mark.parametrize("gpu, offered, down, expected, installs", [
+    (True, "2.13.0", "", "the CUDA build", ["pip install -q torch==2.13.0"]),
+    (False, "2.13.0+cpu", "", "the configured index serves 2.13.0+cpu", ["pip install -q torch==2.13.0"]),
+    (False, "2.13.0", "", "from https://download.pytorch.org/whl/cpu",
+     ["pip install -q torch==2.13.0 --index-url https://download.pytorch.org/whl/cpu"]),
+    (False, "2.13.0", "1", "cannot be reached; torch==2.13.0 from the configured index instead",
+     ["pip install -q torch==2.13.0 --index-url https://download.pytorch.org/whl/cpu", "pip install -q torch==2.13.0"]),
+])
+def test_the_torch_install_takes_the_cpu_build_without_a_gpu(tmp_path, gpu, offered, down, expected, installs):
+    """scripts/install_torch.sh with a stand-in pip (nothing is downloaded): without an NVIDIA GPU the CPU build,
+    from the configured index when it serves one (this project's CI: a +cpu wheel in its local store), else from
+    PyTorch's CPU index, else, that index unreachable, the configured one; one line says which."""
+    fake = tmp_path / "python"
+    fake.write_text(FAKE_PYTHON)
+    fake.chmod(0o755)
+    log = tmp_path / "pip.log"
+    env = {"PATH": os.environ["PATH"], "PYTHON": str(fake), "REAL": sys.executable, "LOG": str(log),
+           "OFFERED": offered, "DOWN": down, "NVIDIA_SMI": "true" if gpu else str(tmp_path / "no-nvidia-smi")}
+    out = subprocess.run(["sh", str(ROOT / "scripts" / "install_torch.sh")], env=env, capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert expected in out.stdout and out.stdout.startswith("torch: ")
+    calls = [c for c in log.read_text().splitlines() if "--dry-run" not in c]
+    assert calls == installs

@@ -127,6 +127,9 @@ def _save_frame(picture: np.ndarray, frames_dir: Path, k: int) -> None:
 
 
 BASELINES = ("random", "greedy")
+# Under a FlyAgent of the simple policy (fly.policy: simple) a drone's task is to reach its goal, not to put out fire.
+SIMPLE_POLICY_NOTE = ("fly.policy = simple: an episode succeeds when the drones reach their goals; they put out no "
+                      "fire, so Extinguished reads 0")
 # Which greedy heuristic a planner evaluation plays (planner.greedy_home), as its tables and JSON name it.
 GREEDY_HOME_NOTES = {
     "original": "the original's heuristic, defect included: a fire on the groundstation cell is re-taken every step "
@@ -139,15 +142,35 @@ GREEDY_HOME_NOTES = {
 
 def baseline_name(baseline: str, cfg: Config, planner: bool) -> tuple[str, str]:
     """(column name, note) of ``baseline`` in a comparison: the planner's greedy says which heuristic it plays
-    (``greedy (original)`` or ``greedy (fixed)``, :data:`GREEDY_HOME_NOTES`); other baselines are their name."""
+    (``greedy (original)`` or ``greedy (fixed)``, :data:`GREEDY_HOME_NOTES`), and ``resource-aware greedy (...)``
+    where it watches its batteries (a battery with ``planner.greedy_resources``); other baselines are their name."""
     if baseline == "greedy" and planner:
         home = cfg.planner.greedy_home
-        return f"greedy ({home})", f"greedy ({home}), planner.greedy_home = {home}: {GREEDY_HOME_NOTES[home]}"
+        aware = cfg.planner.greedy_resources and cfg.drones.energy.enabled
+        name = f"resource-aware greedy ({home})" if aware else f"greedy ({home})"
+        note = f"{name}, planner.greedy_home = {home}: {GREEDY_HOME_NOTES[home]}"
+        if aware:
+            note += ("; it sends a drone home when its battery or tank runs low and waits there until both are full "
+                     "(planner.greedy_resources)")
+        return name, note
     return baseline, ""
-# Where training and evaluation differ by design, the learning curves say why.
+# Where training and evaluation differ by design, the learning curves say why (and, from the run's own log, what
+# its training episodes did: :func:`training_note`).
 TRAINING_NOTES = {PLANNER.name: "Training episodes (Episodes/*) sample goals from the stochastic policy with the "
-                             "explorers at the groundstation, and time out: success 0 by design. Evaluation "
-                             "(Evaluation/*) takes the argmax goal with the explorers flying."}
+                             "explorers at the groundstation; evaluation (Evaluation/*) takes the argmax goal with "
+                             "the explorers flying."}
+
+
+def training_note(level: str, scalars: dict) -> str | None:
+    """The learning curves' note for ``level``: :data:`TRAINING_NOTES` plus the training episodes' success rate at
+    the first and the last point of the run's log (``Episodes/success_rate``), so the note never contradicts the
+    curve under it."""
+    note = TRAINING_NOTES.get(level)
+    points = scalars.get("Episodes/success_rate")
+    if note is None or not points:
+        return note
+    first, last = points[0][1], points[-1][1]
+    return f"{note} Training success {first:.2f} at the first point, {last:.2f} at the last."
 
 
 def _say(line: str) -> None:
@@ -315,22 +338,32 @@ def _write_outputs(episodes: dict, out_dir: Path, title: str, provenance, reason
     return summary
 
 
+def _note_simple_policy(cfg: Config, summary: dict, out: Path) -> None:
+    """Under a simple-policy FlyAgent a table of 100 % success beside 0 extinguished says why: in ``summary["note"]``
+    (printed under the table) and at the end of ``table.txt``."""
+    if cfg.train.level.flies and cfg.fly.policy == "simple":
+        summary["note"] = SIMPLE_POLICY_NOTE
+        with (out / "table.txt").open("a") as table:
+            table.write(SIMPLE_POLICY_NOTE + "\n")
+
+
 def write_learning_curves(run_dir: Path, path: Path, title: str, level: str, say=_quiet) -> None:
     """The run's learning curves from its TensorBoard events (nothing where it has none), with the note of
-    ``TRAINING_NOTES`` where training and evaluation differ by design."""
+    :func:`training_note` where training and evaluation differ by design."""
     tb = run_dir / "tb"
     scalars = read_tensorboard_scalars(tb) if tb.is_dir() else {}
     if scalars:
         say(f"writing learning curves to {path}")
-        plot_learning_curves(scalars, path, title=title, note=TRAINING_NOTES.get(level))
+        plot_learning_curves(scalars, path, title=title, note=training_note(level, scalars))
 
 
 def flyagent_json(summary: dict, reasons: tuple[str, ...] = ("collision", "boundary", "timeout")) -> dict:
-    """The issue's eval JSON: episodes, success_rate, failure_rates (collision, boundary, timeout, and the env's
-    other ``failure_reasons``: the planner adds burnout; a reason the env cannot have reads 0), tte (steps); with a
-    battery also drones_lost, battery_swaps, energy_used (J) and base_time (s), means per episode."""
+    """The eval JSON: episodes, success_rate, failure_rates (one per failure the controller can have, its env's
+    ``failure_reasons``: collision, boundary and timeout for a FlyAgent; timeout and burnout for a planner or its
+    greedy; lost with a battery), tte (steps); with a battery also drones_lost, battery_swaps, energy_used (J) and
+    base_time (s), means per episode."""
     fr = summary["failure_rates"]
-    keys = ("collision", "boundary", "timeout", *(r for r in reasons if r not in ("collision", "boundary", "timeout")))
+    keys = tuple(reasons)
     out = {"episodes": summary["episodes"], "success_rate": summary["success_rate"],
            "failure_rates": {k: fr.get(k, 0.0) for k in keys},
            "tte": {k: summary["tte"][k] for k in ("mean", "std", "median")}}
@@ -395,6 +428,7 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         who, reasons, dt = f"{cfg.train.algo} policy", env.failure_reasons, cfg.fire.dt
         summary = write_outputs(eps, out, f"{run_dir.name} ({path.stem}, {len(eps['time'])} episodes, seed {seed})",
                                 provenance, reasons, dt, who, say)
+        _note_simple_policy(cfg, summary, out)
         write_learning_curves(run_dir, out / "learning_curves.png", f"{run_dir.name}: {who}", cfg.train.level.name, say)
         payload = flyagent_json(summary, env.failure_reasons)
         if base_eps is not None:

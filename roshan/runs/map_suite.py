@@ -107,7 +107,11 @@ def map_row(name: str, land: LandCoverMap, summary: dict) -> dict:
     if "baseline" in summary:
         row["baseline"] = {"name": summary["baseline_name"], **controller_figures(summary["baseline"])}
         mine, theirs = row["policy"]["tte_median"], row["baseline"]["tte_median"]
-        row["tte_median_ratio"] = mine / theirs if mine is not None and theirs else None
+        # With no success, a controller's median TTE is its time limit: a ratio of time limits says nothing.
+        succeeded = row["policy"]["success_rate"] > 0 and row["baseline"]["success_rate"] > 0
+        row["tte_median_ratio"] = mine / theirs if succeeded and mine is not None and theirs else None
+        if not succeeded:
+            row["tte_median_ratio_note"] = NO_SUCCESS
     return row
 
 
@@ -118,6 +122,9 @@ def suite_command(map_provenance: dict, maps: Sequence[str]) -> str:
     at = next(i for i in range(len(words) - 1) if words[i:i + 2] == ["--set", map_provenance["overrides"][-1]])
     del words[at:at + 2]
     return shlex.join([*words[:3], "--maps", ",".join(maps), *words[3:]])
+
+
+NO_SUCCESS = "n/a: no episode succeeded"
 
 
 def _pct(rate: float) -> str:
@@ -150,7 +157,7 @@ def format_maps_table(rows: Sequence[dict], title: str) -> str:
         if battery:
             cells += [_number(r.get(key, {}).get("drones_lost"), 2) for key, _ in who]
         if base:
-            cells.append(_number(r.get("tte_median_ratio"), 2))
+            cells.append(r.get("tte_median_ratio_note") or _number(r.get("tte_median_ratio"), 2))
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

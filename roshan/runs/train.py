@@ -35,6 +35,7 @@ from roshan.checkpoints import (
 )
 from roshan.config import Config, dump_config
 from roshan.io import OutputError, prepare_output, writing
+from roshan.runs.budget import budget_total
 from roshan.runs.envs import make_env
 from roshan.runs.episode_log import EpisodeLog
 from roshan.runs.evaluate import TRAINING_NOTES, evaluate_run, run_episodes
@@ -175,10 +176,10 @@ class Trainer:
         return None
 
     def _bar(self):
-        tc = self.cfg.train
-        total = tc.total_steps if tc.total_steps and self.learner.counts_env_steps else None
-        return tqdm(total=total, initial=self.progress.env_steps if total else self.progress.updates,
-                    unit="step" if total else "update", dynamic_ncols=True,
+        counts_steps = self.learner.counts_env_steps
+        total = budget_total(self.cfg.train, self.progress, 0, counts_steps)
+        return tqdm(total=total, initial=self.progress.env_steps if counts_steps else self.progress.updates,
+                    unit="step" if counts_steps else "update", dynamic_ncols=True,
                     disable=not self.progress_bar, desc=self.run_dir.name)
 
     # ------------------------------------------------------------------------------------------ run
@@ -193,6 +194,8 @@ class Trainer:
             while not self.done():
                 self._update(bar)
             self.stopped_by = self.stop_reason()
+            bar.total = bar.n  # the bar ends where training ended
+            bar.refresh()
             if self.progress_bar:
                 bar.write(f"{self.run_dir.name}: training stopped: {self.stopped_by}")
             with writing("TensorBoard events", self.run_dir / "tb"):
@@ -231,7 +234,9 @@ class Trainer:
         if self.cfg.train.eval_every and p.updates % self.cfg.train.eval_every == 0:
             self._periodic_eval()  # before _checkpoint, so that latest carries the new best_eval
         self._checkpoint(metrics["rewards_raw"])
-        bar.update(steps if bar.total else 1)
+        counts_steps = self.learner.counts_env_steps
+        bar.total = budget_total(self.cfg.train, p, steps, counts_steps)  # where the budget that binds stops it
+        bar.update(steps if counts_steps else 1)
         # one speed readout: tqdm's own rate (steps/s, or updates/s where the bar counts updates)
         bar.set_postfix(success=f"{self.episodes.success_so_far:.2f}", R=f"{metrics['rewards_raw']:+.3f}",
                         refresh=False)

@@ -73,6 +73,9 @@ def test_explicit_out_and_json_follow_the_same_rule(model, tmp_path):
     payload = json.loads(js.read_text())
     assert set(payload) == {"episodes", "success_rate", "failure_rates", "tte", "provenance"}
     assert payload["provenance"]["episodes"] == 2 and payload["provenance"]["envs"] == 2
+    # the simple policy reaches goals and puts out no fire: its table says so beside "Extinguished"
+    note = "fly.policy = simple: an episode succeeds when the drones reach their goals; they put out no fire"
+    assert note in res.output and note in (out / "table.txt").read_text()
     before = js.read_bytes(), (out / "summary.json").read_bytes()
 
     res = cli("eval", model, *TINY, "--out", out, "--set", "fire.dt=0.2")

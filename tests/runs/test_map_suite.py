@@ -41,7 +41,10 @@ def test_a_suite_writes_one_evaluation_per_map_and_a_summary_of_them(tmp_path):
         assert row["policy"]["tte_median"] == policy["tte"]["median"]
         assert row["baseline"]["success_rate"] == greedy["success_rate"]
         assert row["baseline"]["tte_median"] == greedy["tte"]["median"]
-        assert row["tte_median_ratio"] == pytest.approx(policy["tte"]["median"] / greedy["tte"]["median"])
+        if policy["success_rate"] > 0 and greedy["success_rate"] > 0:
+            assert row["tte_median_ratio"] == pytest.approx(policy["tte"]["median"] / greedy["tte"]["median"])
+        else:  # a median of time limits: no ratio
+            assert row["tte_median_ratio"] is None and row["tte_median_ratio_note"] == "n/a: no episode succeeded"
         assert row["cells"] == {"15x15_Woods": 225, "21x21_Field": 441}[name]
         assert f"models/planner on {name} (best_eval, seed 0)" in res.output  # each map's own table
         assert f"| {name} | {row['cells']}" in (out / "maps.md").read_text()
@@ -92,3 +95,23 @@ def test_the_summary_has_drones_lost_columns_with_a_battery(tmp_path):
     assert "| 15x15_Woods | 225 (15 x 15) | 100.0 % | 200.0 | 100.0 % | 400.0 | 1.00 | 2.00 | 0.50 |" in table
     assert (tmp_path / "maps.md").read_text() == table + "\n"
     assert json.loads((tmp_path / "maps.json").read_text())["maps"] == [row]
+
+
+def test_a_tte_ratio_without_successes_reads_n_a(tmp_path):
+    """Where a controller succeeded in no episode its median TTE is the time limit, so the suite prints no ratio
+    of two time limits (it printed 1.00 when every episode of both timed out)."""
+    from roshan.maps import load_map
+
+    def summary(success):
+        n = len(success)
+        reasons = ["none" if s else "timeout" for s in success]
+        return summarize({"time": [9680] * n, "success": success, "reason": reasons}, reasons=("timeout",), dt=0.1)
+
+    for policy_success, greedy_success in (([0, 0], [0, 0]), ([1, 0], [0, 0]), ([0, 0], [1, 1])):
+        evaluation = summary(policy_success) | {"baseline_name": "resource-aware greedy (fixed)"}
+        evaluation["baseline"] = summary(greedy_success)
+        row = map_row("15x15_Woods", load_map("15x15_Woods"), evaluation)
+        assert row["tte_median_ratio"] is None and row["tte_median_ratio_note"] == "n/a: no episode succeeded"
+        table = write_suite_summary([row], tmp_path, "suite", {"command": "roshan eval"})
+        assert table.splitlines()[-1].endswith("| n/a: no episode succeeded |")
+        assert "1.00" not in table.splitlines()[-1]
