@@ -1,5 +1,6 @@
 """The simulator's sections: map, fire physics, wind, initial fires, drones, batch and arch."""
 
+import math
 from dataclasses import dataclass, field
 
 from roshan.config.schema import INT32_MAX, ConfigError, Section, choice, num
@@ -162,6 +163,20 @@ class DroneConfig(Section):
     water_capacity: float = num(4.0, 0.0, lo_open=True, doc="tank size in drops (one drop puts out one cell)")
     recharge_time: float = num(2.0, 0.0, doc="seconds an empty tank takes to refill at the groundstation")
     energy: EnergyConfig = field(default_factory=EnergyConfig)
+
+
+    def battery_reach(self) -> float | None:
+        """Metres from the groundstation a full battery can take a drone and bring it back, at the speed that goes
+        farthest on a joule (at most v_max on both axes) with the tank full; None without a battery. No fire
+        farther than this can be put out (issue 52)."""
+        if not self.energy.enabled:
+            return None
+        e = self.energy.values()
+        still = e["hover_power"] + e["payload_power"]  # power at rest; the speed term grows with |v|^2
+        fastest = math.sqrt(2.0) * self.max_speed
+        speed = fastest if e["speed_power"] == 0 else min(fastest, math.sqrt(still / e["speed_power"]))
+        power = still + e["speed_power"] * speed * speed
+        return math.inf if power == 0 else e["capacity"] / power * speed / 2.0
 
 
 @dataclass(frozen=True)

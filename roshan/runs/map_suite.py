@@ -19,6 +19,7 @@ from roshan.config import Config, apply_overrides
 from roshan.io import OutputError, write_atomic, writing
 from roshan.maps import LandCoverMap, MapError, check_drone_map, load_map
 from roshan.runs.evaluate import default_checkpoint, eval_root, evaluate_run, evaluation_name, held_results, output_lock
+from roshan.runs.report.notes import ratio_is_meaningful
 from roshan.runtime import current_arch
 
 SUMMARY_FILES = ("maps.md", "maps.json")
@@ -104,10 +105,17 @@ def map_row(name: str, land: LandCoverMap, summary: dict) -> dict:
     row = {"map": name, "source": str(land.source) if land.source else name, "rows": land.rows, "cols": land.cols,
            "cells": land.rows * land.cols, "episodes": summary["episodes"], "folder": name,
            "policy": controller_figures(summary)}
+    notes = list(summary.get("notes", ()))
     if "baseline" in summary:
         row["baseline"] = {"name": summary["baseline_name"], **controller_figures(summary["baseline"])}
         mine, theirs = row["policy"]["tte_median"], row["baseline"]["tte_median"]
-        row["tte_median_ratio"] = mine / theirs if mine is not None and theirs else None
+        meaningful = ratio_is_meaningful(summary, summary["baseline"])
+        row["tte_median_ratio"] = mine / theirs if meaningful and mine is not None and theirs else None
+        notes += [n for n in summary["baseline"].get("notes", ()) if n not in notes]
+        if not meaningful:
+            notes.append("no TTE ratio: a controller with no success has the step limit as its TTE")
+    if notes:
+        row["notes"] = notes
     return row
 
 
@@ -152,7 +160,8 @@ def format_maps_table(rows: Sequence[dict], title: str) -> str:
         if base:
             cells.append(_number(r.get("tte_median_ratio"), 2))
         lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    notes = [f"- {r['map']}: {n}" for r in rows for n in r.get("notes", ())]
+    return "\n".join(lines + (["", "Notes:", *notes] if notes else []))
 
 
 def write_suite_summary(rows: Sequence[dict], out_dir: Path, title: str, provenance: dict) -> str:

@@ -77,7 +77,7 @@ def format_table(summary: dict, title: str = "Evaluation") -> str:
     Rates are percentages (the success rate with its Wilson interval in brackets); TTE, reward and the fire read
     "mean ± std (median)".
     """
-    return _render(title, ["Value"], [_row_values(summary)])
+    return _render(title, ["Value"], [_row_values(summary)]) + _notes([summary])
 
 
 def format_comparison(summaries: Mapping[str, dict], title: str = "Comparison") -> str:
@@ -94,4 +94,10 @@ def format_comparison(summaries: Mapping[str, dict], title: str = "Comparison") 
         for reason in ("unspecified", "burnout"):
             if any(_rate_label(reason) in other for other in columns):
                 col.setdefault(_rate_label(reason), _pct(0.0))
-    return _render(title, [str(name) for name in summaries], columns)
+    return _render(title, [str(name) for name in summaries], columns) + _notes(summaries.values())
+
+
+def _notes(summaries) -> str:
+    """The summaries' notes (:mod:`roshan.runs.report.notes`), each once, as lines under the table."""
+    notes = list(dict.fromkeys(n for s in summaries for n in s.get("notes", ())))
+    return "".join(f"\nnote: {n}" for n in notes)
