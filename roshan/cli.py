@@ -588,14 +588,16 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
 @EXPERIMENT_STORAGE
 @click.option("--root", default="runs", show_default=True, type=click.Path(file_okay=False))
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
-              help="Report folder (default: ROOT/NAME/report).")
-def experiment_report(spec_path, budget, storage, root, out_dir):
+              help="Report folder (default: ROOT/NAME/report); an earlier report of this experiment there is "
+                   "refreshed, other files of a report's names are refused unless --replace.")
+@click.option("--replace", is_flag=True, help="Overwrite a report's files in --out that another command wrote.")
+def experiment_report(spec_path, budget, storage, root, out_dir, replace):
     """Thesis-style tables of SPEC's finished runs (mean ± std (median) over seeds beside the thesis's values),
     per-seed rows (CSV, JSON) and a plot."""
     from roshan.experiment.report import report_experiment
 
     with reported():
-        click.echo(report_experiment(spec_path, budget, storage, root, out_dir))
+        click.echo(report_experiment(spec_path, budget, storage, root, out_dir, replace))
 
 
 # ------------------------------------------------------------------------------------------------ bench

@@ -342,6 +342,10 @@ def claim_folder(folder: Path, fingerprint: str) -> None:
     mark = folder / "fingerprint"
     if mark.is_file() and (old := mark.read_text().strip()) != fingerprint:
         aside = folder.with_name(f"{folder.name}.superseded-{old}")
+        n = 1
+        while aside.exists():  # set aside before (settings A -> B -> A -> C): a name of its own, never a collision
+            n += 1
+            aside = folder.with_name(f"{folder.name}.superseded-{old}.{n}")
         folder.rename(aside)
         print(f"{folder}: made under other settings (fingerprint {old}); set aside as {aside}", file=sys.stderr)
     if not mark.is_file():

@@ -19,7 +19,15 @@ import optuna
 import pytest
 
 from roshan.experiment.findings import verdict
-from roshan.experiment.report import condition_rows, done_results, markdown, per_seed_csv, rate, results_of
+from roshan.experiment.report import (
+    condition_rows,
+    done_results,
+    markdown,
+    per_seed_csv,
+    rate,
+    report_experiment,
+    results_of,
+)
 from roshan.experiment.runner import (
     RERUN_ATTR,
     STUDY_ATTR,
@@ -35,6 +43,7 @@ from roshan.experiment.runner import (
     run_worker,
 )
 from roshan.experiment.spec import Reference, SpecError, load_spec
+from roshan.io import OutputError
 from roshan.study.storage import open_storage
 
 REPO = Path(__file__).resolve().parents[2]
@@ -764,3 +773,42 @@ def test_the_success_plot_stays_one_page_wide_and_names_conditions_not_run(tmp_p
         assert len(not_run) == len(spec.conditions) - 1  # every condition but `fast`
     finally:
         plt.close(fig)
+
+
+def test_a_folder_set_aside_twice_under_one_fingerprint_gets_a_name_of_its_own(tmp_path):
+    # issue 52: a failed run whose condition went A -> B -> A -> C failed from then on with "[Errno 39] Directory not
+    # empty: '.../seed_0' -> '...superseded-<A>'" and "fix the cause and continue" looped
+    folder = tmp_path / "fast" / "seed_0"
+    for fingerprint in ("A", "B", "A", "C"):
+        claim_folder(folder, fingerprint)
+    assert (folder / "fingerprint").read_text().strip() == "C"
+    assert sorted(p.name for p in folder.parent.iterdir()) == [
+        "seed_0", "seed_0.superseded-A", "seed_0.superseded-A.2", "seed_0.superseded-B"]
+
+
+def test_the_report_refuses_a_spec_changed_under_its_runs_as_run_does(tmp_path):
+    # issue 52: `experiment report` printed the old runs under the new settings, with no warning
+    spec_path = write_spec(tmp_path)
+    spec, url, _ = start(spec_path, tmp_path)
+    run_worker(spec, url, tmp_path, execute=recording_execute(tmp_path / "log"))  # fast/seed_0 has run
+    spec_path.write_text(spec_path.read_text().replace("train.max_updates: 3", "train.max_updates: 4"))
+    with pytest.raises(SpecError, match=r"runs made with other settings under the same keys \(fast/seed_0\)"):
+        report_experiment(spec_path, "local", url, tmp_path, tmp_path / "report")
+    assert not (tmp_path / "report").exists()
+
+
+def test_the_report_overwrites_only_its_own_earlier_report_unless_replace(tmp_path):
+    # issue 52: `experiment report SPEC --out DIR` into an evaluation's folder replaced its summary.json
+    spec_path = write_spec(tmp_path)
+    spec, url, _ = start(spec_path, tmp_path)
+    run_worker(spec, url, tmp_path, execute=recording_execute(tmp_path / "log"))
+    evaluation = tmp_path / "eval"
+    evaluation.mkdir()
+    (evaluation / "summary.json").write_text('{"episodes": 100}\n')
+    with pytest.raises(OutputError, match=r"it holds summary\.json of something other than a report of experiment "
+                                          r"'demo'; give --replace"):
+        report_experiment(spec_path, "local", url, tmp_path, evaluation)
+    assert (evaluation / "summary.json").read_text() == '{"episodes": 100}\n'
+    report_experiment(spec_path, "local", url, tmp_path, evaluation, replace=True)
+    assert (evaluation / "report.md").read_text().startswith("Experiment `demo` (")
+    report_experiment(spec_path, "local", url, tmp_path, evaluation)  # its own report: refreshed
