@@ -564,7 +564,7 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
                    threads):
     """Train and evaluate every (condition, seed) of SPEC; run it again to continue after a crash (finished runs
     are kept, a killed one continues from its checkpoint); machines sharing --storage split the runs."""
-    from roshan.experiment.runner import run_experiment, run_worker, spec_storage
+    from roshan.experiment.runner import run_experiment, run_storage, run_worker, spec_storage
     from roshan.experiment.spec import load_spec
     from roshan.study.trial import local_values
 
@@ -573,13 +573,16 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
         chosen = spec.select(only)
         extra = tuple(f"{k}={v}" for k, v in local_values(arch, threads).items())
         if worker:
-            url = spec_storage(spec, root, storage)
+            url = run_storage(spec, root, storage)
             sys.exit(run_worker(spec, url, root, heartbeat=heartbeat, max_retry=max_retry, extra=extra, only=chosen))
         args = (["--arch", arch] if arch else []) + (["--threads", str(threads)] if threads else [])
         run_experiment(spec, root, storage, workers, args, heartbeat, max_retry, echo=click.echo, only=chosen,
                        rerun=spec.select_runs(rerun) if rerun else ())
+        # the report reads the spec's journal by default: name the copy the runs went to when it is another
+        used = run_storage(spec, root, storage)
+        named = used if storage or used != spec_storage(spec, root) else None
     click.echo(f"report: roshan experiment report {spec_path}" + (f" --budget {budget}" if budget != "local" else "")
-               + (f" --storage {storage}" if storage else "") + (f" --root {root}" if root != "runs" else ""))
+               + (f" --storage {named}" if named else "") + (f" --root {root}" if root != "runs" else ""))
 
 
 @experiment.command("report")

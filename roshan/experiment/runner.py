@@ -79,6 +79,25 @@ def spec_storage(spec: Spec, root: str | Path, storage: str | None = None) -> st
     return storage or spec.storage or default_storage(root, spec.name)
 
 
+def run_storage(spec: Spec, root: str | Path, storage: str | None = None,
+                echo: Callable[[str], None] = print) -> str:
+    """Where ``experiment run`` records ``spec``'s runs: ``--storage``; else a spec's committed journal is never
+    written (a plain ``run`` or ``--only`` would add records to a tracked file): the runs go to
+    ROOT/NAME/experiment.journal, made as a copy of it the first time, so its finished runs are kept. A spec whose
+    storage is a URL (a database the machines share) uses it."""
+    if storage or not spec.storage or "://" in spec.storage:
+        return spec_storage(spec, root, storage)
+    copy = Path(default_storage(root, spec.name))
+    committed = Path(spec.storage)
+    if not copy.exists() and committed.is_file():
+        with writing("a copy of the experiment journal", copy):
+            copy.parent.mkdir(parents=True, exist_ok=True)
+            write_atomic(copy, committed.read_bytes())
+        echo(f"experiment {spec.name}: runs are recorded in {copy}, a copy of the spec's journal {committed} (to add "
+             f"them to that one, give --storage {committed})")
+    return str(copy)
+
+
 def run_dir(root: str | Path, name: str, run: Run) -> Path:
     return experiment_dir(root, name) / run.condition.name / f"seed_{run.seed}"
 
@@ -469,7 +488,7 @@ def run_experiment(spec: Spec, root: str | Path = "runs", storage: str | None = 
     still created, so other runs keep their place for a later call), after queueing the finished runs that
     ``rerun`` names (conditions or runs ``CONDITION/seed_S``) again; returns the study."""
     check_trainable(spec, only)
-    url = spec_storage(spec, root, storage)
+    url = run_storage(spec, root, storage, echo)
     store = open_storage(url, heartbeat, max_retry, repair=True, echo=echo)
     study = prepare_experiment(store, spec, echo)
     if rerun:

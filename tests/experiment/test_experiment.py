@@ -40,6 +40,7 @@ from roshan.experiment.runner import (
     run_dir,
     run_experiment,
     run_key,
+    run_storage,
     run_worker,
 )
 from roshan.experiment.spec import Reference, SpecError, load_spec
@@ -812,3 +813,26 @@ def test_the_report_overwrites_only_its_own_earlier_report_unless_replace(tmp_pa
     report_experiment(spec_path, "local", url, tmp_path, evaluation, replace=True)
     assert (evaluation / "report.md").read_text().startswith("Experiment `demo` (")
     report_experiment(spec_path, "local", url, tmp_path, evaluation)  # its own report: refreshed
+
+
+def test_a_committed_journal_is_written_only_when_named_as_storage(tmp_path):
+    # issue 52: `experiment run configs/experiments/endurance.yaml --only ...` on a finished condition added records to
+    # the committed, tracked journal, because the spec names it as its storage
+    journal = tmp_path / "committed" / "experiment.journal"
+    journal.parent.mkdir()
+    spec_path = write_spec(tmp_path, SPEC.replace("name: demo", f"name: demo\nstorage: {journal}"))
+    spec = load_spec(spec_path)
+    prepare_experiment(open_storage(str(journal), heartbeat=60), spec)
+    run_worker(spec, str(journal), tmp_path, execute=recording_execute(tmp_path / "log"))
+    committed = journal.read_bytes()
+    said = []
+    url = run_storage(spec, tmp_path / "root", echo=said.append)
+    assert url == str((tmp_path / "root" / "demo" / "experiment.journal").resolve())
+    assert said == [f"experiment demo: runs are recorded in {url}, a copy of the spec's journal {journal} (to add "
+                    f"them to that one, give --storage {journal})"]
+    study = prepare_experiment(open_storage(url, heartbeat=60), spec)
+    run_worker(spec, url, tmp_path, execute=recording_execute(tmp_path / "log"))
+    assert progress(study)["done"] == 2  # the committed journal's finished run is kept in the copy
+    assert journal.read_bytes() == committed
+    assert run_storage(spec, tmp_path / "root", echo=said.append) == url and len(said) == 1  # made once
+    assert run_storage(spec, tmp_path / "root", str(journal)) == str(journal)  # named: written
