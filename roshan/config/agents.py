@@ -141,3 +141,15 @@ class PlannerConfig(Section):
     network: str = choice("thesis", ("thesis", "pointer"),
                           doc="the planner network: docs/model/learning.md §3.1 (thesis) or §3.2 (pointer, newest)")
     rewards: PlannerRewardConfig = field(default_factory=PlannerRewardConfig)
+
+    def inert(self, battery: bool) -> list[str]:
+        """Settings that change nothing (or nothing useful) here, each as a warning line (issue 52); ``battery``:
+        the drones carry one (``drones.energy.enabled``)."""
+        out = []
+        if self.planner_resources and not battery:
+            out.append("planner.planner_resources = true does nothing while drones.energy.preset is off: the return "
+                       "rule watches the drones' batteries")
+        if self.max_candidates == 1:
+            out.append("planner.max_candidates = 1 lists the groundstation alone (candidate 0): the planner can choose "
+                       "no fire; 0 lists every cell")
+        return out

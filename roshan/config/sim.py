@@ -165,6 +165,14 @@ class DroneConfig(Section):
     energy: EnergyConfig = field(default_factory=EnergyConfig)
 
 
+    def inert(self) -> list[str]:
+        """Settings that change nothing here, each as a warning line (issue 52): set but silent, they read as if
+        they had been applied."""
+        if not self.energy.enabled and self.energy.approach > 0:
+            return [f"drones.energy.approach = {self.energy.approach!r} does nothing while drones.energy.preset is "
+                    "off: only a drone flying home to swap its battery makes the final approach"]
+        return []
+
     def battery_reach(self) -> float | None:
         """Metres from the groundstation a full battery can take a drone and bring it back, at the speed that goes
         farthest on a joule (at most v_max on both axes) with the tank full; None without a battery. No fire

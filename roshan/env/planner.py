@@ -7,6 +7,8 @@ the actions, and since fire layouts and wind depend only on the env seed and the
 the heuristic evaluated with the same seed and number of envs play identical initial episodes.
 """
 
+import warnings
+
 import gymnasium as gym
 import numpy as np
 import torch
@@ -68,6 +70,8 @@ class PlannerVectorEnv(VectorEnvCore):
                                                                       key="planner.explorer_model")
         ex_frames = self.explorer_policy.frames if self.explorer_policy else 1
         super().__init__(num_envs, config, seed, render_mode)
+        for line in pc.inert(self.config.drones.energy.enabled):  # the same text warns once (Python's default filter)
+            warnings.warn(f"{self.level_name()}: {line}", stacklevel=2)
         n, m = self.num_drones, pc.num_explorers
         self.interval = pc.interval
         self._define_spaces(n)
