@@ -332,7 +332,10 @@ def report_experiment(spec_path: str | Path, budget: str, storage: str | None, r
     if "://" not in url and not Path(url).is_file():
         raise FileNotFoundError(f"{url}: no experiment journal; run `roshan experiment run {spec_path}` first "
                                 "(or give --storage / --root)")
-    study = load_experiment(open_storage(url, heartbeat=None, repair=False), spec.name)
+    # a cut journal is repaired by the command that writes it, naming it: a spec's committed journal is written
+    # only when --storage names it
+    hint = f"`roshan experiment run {spec_path}{' --budget thesis' if budget != 'local' else ''} --storage {url}`"
+    study = load_experiment(open_storage(url, heartbeat=None, repair=False, repair_hint=hint), spec.name)
     check_runs(spec, study.user_attrs[STUDY_ATTR], study)
     out = Path(out_dir) if out_dir else experiment_dir(root, spec.name) / "report"
     if not replace:

@@ -836,3 +836,16 @@ def test_a_committed_journal_is_written_only_when_named_as_storage(tmp_path):
     assert journal.read_bytes() == committed
     assert run_storage(spec, tmp_path / "root", echo=said.append) == url and len(said) == 1  # made once
     assert run_storage(spec, tmp_path / "root", str(journal)) == str(journal)  # named: written
+
+
+def test_a_cut_journal_names_the_experiment_command_that_repairs_it(tmp_path):
+    # issue 52: `experiment report` suggested `roshan study run --resume --name j --root .`, a study command with the
+    # wrong name; the repair is `roshan experiment run SPEC`
+    spec_path = write_spec(tmp_path)
+    spec, url, _ = start(spec_path, tmp_path)
+    with open(url, "ab") as f:
+        f.write(b'{"op_code": 5, "cut')
+    with pytest.raises(ValueError,
+                       match=rf"of the study journal is cut .*; `roshan experiment run {re.escape(str(spec_path))} "
+                             rf"--storage {re.escape(url)}` drops it"):
+        report_experiment(spec_path, "local", url, tmp_path, tmp_path / "report")
