@@ -21,6 +21,7 @@ from roshan.kernels import observe
 from roshan.kernels.launch import PreparedLaunch
 from roshan.kernels.planner import obs_layout
 from roshan.kernels.pool import take_planner_sims
+from roshan.maps import check_explorer_map
 from roshan.runtime import ensure_taichi, torch_device
 
 
@@ -88,6 +89,11 @@ class PlannerVectorEnv(VectorEnvCore):
         self._fly_cache = self.fly_policy.new_cache()
         self._explore_cache = self.explorer_policy.new_cache() if self.explorer_policy else None
         self._prepare_launches()
+
+    def _check_map(self) -> None:
+        """The drones' checks of every level, and a map side the explorers' stripes can share."""
+        super()._check_map()
+        check_explorer_map(self.land, self.planner_config.num_explorers)
 
     @property
     def has_energy(self) -> bool:

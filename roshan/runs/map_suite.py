@@ -17,7 +17,7 @@ from tqdm import tqdm
 from roshan.checkpoints import config_of_checkpoint, load_checkpoint, resolve_checkpoint
 from roshan.config import Config, apply_overrides
 from roshan.io import OutputError, write_atomic, writing
-from roshan.maps import LandCoverMap, MapError, check_drone_map, load_map
+from roshan.maps import LandCoverMap, MapError, check_drone_map, check_explorer_map, load_map
 from roshan.runs.evaluate import default_checkpoint, eval_root, evaluate_run, evaluation_name, held_results, output_lock
 from roshan.runs.report.notes import ratio_is_meaningful
 from roshan.runtime import current_arch
@@ -55,6 +55,8 @@ def check_maps(maps: Sequence[str], trained: Config, overrides: Sequence[str] = 
             land = load_map(cfg.map.name, band=cfg.map.band or None, rows=cfg.map.uniform_rows,
                             cols=cfg.map.uniform_cols)
             check_drone_map(land, cfg.ignition.fire_percentage, _fights_fire(cfg), f"a {cfg.train.algo} evaluation")
+            if not cfg.train.level.flies:
+                check_explorer_map(land, cfg.planner.num_explorers)
         except MapError as exc:
             raise MapError(f"--maps: map {spec!r} cannot be evaluated: {exc}") from exc
         if land.name in lands:
