@@ -81,3 +81,15 @@ def test_a_study_name_stays_inside_root(tmp_path):
     with pytest.raises(OutputError, match=r"--name '\.\./x' must be one folder name inside"):
         study_dir(tmp_path, "../x")
     assert study_dir(tmp_path, "fly-ppo") == tmp_path / "fly-ppo"
+
+
+def test_init_from_weights_that_do_not_fit_leave_no_run_folder(tmp_path):
+    # issue 52: train.init_from refused for a battery mismatch still left an empty run folder
+    res = cli("train", ROOT / "configs" / "planner.yaml", "--root", tmp_path / "R", "--name", "x", "--set",
+              f"train.init_from={ROOT / 'models' / 'planner_endurance'}")
+    assert res.exit_code == 1 and "drones.energy.enabled = False here but True in the checkpoint" in res.output
+    assert not (tmp_path / "R").exists()
+    res = cli("train", ROOT / "configs" / "fly_simple.yaml", "--root", tmp_path / "R", "--set", "ppo.horizon=40",
+              "--set", "sim.envs=4")  # a rollout that does not split over the envs: refused before the folder too
+    assert res.exit_code == 1 and "ppo.horizon = 40 must be a positive multiple" in res.output
+    assert not (tmp_path / "R").exists()
