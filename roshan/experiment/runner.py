@@ -36,10 +36,11 @@ from optuna.trial import TrialState
 
 from roshan import reproducible
 from roshan.algos.frozen import load_agent, policy_fn
-from roshan.checkpoints import checkpoint_path
+from roshan.checkpoints import checkpoint_path, resolve_checkpoint
 from roshan.config import Config, dump_config
 from roshan.experiment.spec import Run, Spec, SpecError
 from roshan.io import prepare_output, write_atomic, writing
+from roshan.maps import MapError, load_map
 from roshan.runs.envs import make_env
 from roshan.runs.evaluate import run_episodes, save_buffer, summarize, write_outputs
 from roshan.runs.learners import check_learnable
@@ -479,6 +480,33 @@ def check_trainable(spec: Spec, only: tuple[str, ...] = ()) -> None:
                 raise SpecError(f"{spec.path}: condition {condition.name}: {e}") from None
 
 
+def check_sources(spec: Spec, only: tuple[str, ...] = ()) -> None:
+    """Refuse, before any worker starts, a condition whose map cannot be loaded or whose frozen FlyAgent models
+    (``planner.fly_model`` / ``explorer_model``, for the planner level and the scripted controllers) are missing:
+    found by a worker they failed each seed in turn, naming neither the spec nor the condition."""
+    maps: dict[tuple, str | None] = {}  # a map shared by conditions is read once
+    for condition in spec.conditions:
+        if only and condition.name not in only:
+            continue
+        cfg = condition.run_config(condition.seeds[0])
+        key = (cfg.map.name, cfg.map.band, cfg.map.uniform_rows, cfg.map.uniform_cols)
+        if key not in maps:
+            try:
+                load_map(cfg.map.name, band=cfg.map.band or None, rows=cfg.map.uniform_rows, cols=cfg.map.uniform_cols)
+                maps[key] = None
+            except MapError as e:
+                maps[key] = str(e)
+        if maps[key] is not None:
+            raise SpecError(f"{spec.path}: condition {condition.name}: map.name: {maps[key]}")
+        if cfg.train.level.flies and condition.trains:
+            continue
+        for model in ("fly_model", "explorer_model"):
+            try:
+                resolve_checkpoint(getattr(cfg.planner, model))
+            except FileNotFoundError as e:
+                raise SpecError(f"{spec.path}: condition {condition.name}: planner.{model}: {e}") from None
+
+
 def run_experiment(spec: Spec, root: str | Path = "runs", storage: str | None = None, workers: int = 1,
                    worker_args: list[str] | tuple = (), heartbeat: int | None = 60, max_retry: int | None = 3,
                    echo: Callable[[str], None] = print, poll: float = 1.0, only: tuple[str, ...] = (),
@@ -488,6 +516,7 @@ def run_experiment(spec: Spec, root: str | Path = "runs", storage: str | None = 
     still created, so other runs keep their place for a later call), after queueing the finished runs that
     ``rerun`` names (conditions or runs ``CONDITION/seed_S``) again; returns the study."""
     check_trainable(spec, only)
+    check_sources(spec, only)
     url = run_storage(spec, root, storage, echo)
     store = open_storage(url, heartbeat, max_retry, repair=True, echo=echo)
     study = prepare_experiment(store, spec, echo)

@@ -32,6 +32,7 @@ from roshan.experiment.runner import (
     RERUN_ATTR,
     STUDY_ATTR,
     check_runs,
+    check_sources,
     check_trainable,
     claim_folder,
     prepare_experiment,
@@ -849,3 +850,23 @@ def test_a_cut_journal_names_the_experiment_command_that_repairs_it(tmp_path):
                        match=rf"of the study journal is cut .*; `roshan experiment run {re.escape(str(spec_path))} "
                              rf"--storage {re.escape(url)}` drops it"):
         report_experiment(spec_path, "local", url, tmp_path, tmp_path / "report")
+
+
+@pytest.mark.parametrize("change, message", [
+    ("config: {planner}\n    controller: greedy", None),  # the spec as it is
+    ("config: {planner}\n    controller: greedy\n    set: {{map.name: no_such_map}}",
+     r"spec.yaml: condition greedy: map.name: .*no_such_map"),
+    ("config: {planner}\n    controller: greedy\n    set: {{planner.fly_model: models/nothing}}",
+     r"spec.yaml: condition greedy: planner.fly_model: models/nothing: no such run folder or checkpoint file"),
+])
+def test_a_bad_map_or_model_in_a_spec_is_refused_before_any_worker_starts(tmp_path, change, message, monkeypatch):
+    # issue 52: a bad map or fly_model in a spec was found only by the worker
+    monkeypatch.chdir(REPO)  # the configs' models/ paths are relative to the checkout
+    spec = load_spec(write_spec(tmp_path, SPEC.replace("config: {planner}\n    controller: greedy", change)))
+    if message is None:
+        check_sources(spec)
+        return
+    storage = tmp_path / "journal"
+    with pytest.raises(SpecError, match=message):
+        run_experiment(spec, tmp_path, str(storage), echo=lambda _: None)
+    assert not storage.exists()
