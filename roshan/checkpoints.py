@@ -25,7 +25,7 @@ from pathlib import Path
 import torch
 
 from roshan.config import ALGO_LEVELS, PLANNER, Config, ConfigError, from_dict, to_dict, upgrade_config_dict
-from roshan.io import atomic_file, prepare_output, writing
+from roshan.io import atomic_file, inside, prepare_output, writing
 
 CHECKPOINTS = ("latest", "best_reward", "best_objective", "best_eval")
 # What "best" means for evaluation: the periodic deterministic evaluation when the run had one (it measures the
@@ -38,8 +38,9 @@ BEST_ORDER = ("best_eval", "best_objective")
 
 def new_run_dir(root: str | Path, name: str) -> Path:
     """``root/name``, or ``root/name_2``, ``_3``... if taken (a run never overwrites another)."""
+    path = inside(root, name, "the run folder")  # checked before --root is made: a bad name creates nothing
     root = prepare_output(root, "run folders")  # a read-only or full --root fails here, before any training
-    path, k = root / name, 1
+    k = 1
     while path.exists():
         k += 1
         path = root / f"{name}_{k}"

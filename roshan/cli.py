@@ -566,7 +566,7 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
                    threads):
     """Train and evaluate every (condition, seed) of SPEC; run it again to continue after a crash (finished runs
     are kept, a killed one continues from its checkpoint); machines sharing --storage split the runs."""
-    from roshan.experiment.runner import run_experiment, run_worker, spec_storage
+    from roshan.experiment.runner import run_experiment, run_storage, run_worker, spec_storage
     from roshan.experiment.spec import load_spec
     from roshan.study.trial import local_values
 
@@ -575,13 +575,16 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
         chosen = spec.select(only)
         extra = tuple(f"{k}={v}" for k, v in local_values(arch, threads).items())
         if worker:
-            url = spec_storage(spec, root, storage)
+            url = run_storage(spec, root, storage)
             sys.exit(run_worker(spec, url, root, heartbeat=heartbeat, max_retry=max_retry, extra=extra, only=chosen))
         args = (["--arch", arch] if arch else []) + (["--threads", str(threads)] if threads else [])
         run_experiment(spec, root, storage, workers, args, heartbeat, max_retry, echo=click.echo, only=chosen,
                        rerun=spec.select_runs(rerun) if rerun else ())
+        # the report reads the spec's journal by default: name the copy the runs went to when it is another
+        used = run_storage(spec, root, storage)
+        named = used if storage or used != spec_storage(spec, root) else None
     click.echo(f"report: roshan experiment report {spec_path}" + (f" --budget {budget}" if budget != "local" else "")
-               + (f" --storage {storage}" if storage else "") + (f" --root {root}" if root != "runs" else ""))
+               + (f" --storage {named}" if named else "") + (f" --root {root}" if root != "runs" else ""))
 
 
 @experiment.command("report")
@@ -590,14 +593,16 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
 @EXPERIMENT_STORAGE
 @click.option("--root", default="runs", show_default=True, type=click.Path(file_okay=False))
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
-              help="Report folder (default: ROOT/NAME/report).")
-def experiment_report(spec_path, budget, storage, root, out_dir):
+              help="Report folder (default: ROOT/NAME/report); an earlier report of this experiment there is "
+                   "refreshed, other files of a report's names are refused unless --replace.")
+@click.option("--replace", is_flag=True, help="Overwrite a report's files in --out that another command wrote.")
+def experiment_report(spec_path, budget, storage, root, out_dir, replace):
     """Thesis-style tables of SPEC's finished runs (mean ± std (median) over seeds beside the thesis's values),
     per-seed rows (CSV, JSON) and a plot."""
     from roshan.experiment.report import report_experiment
 
     with reported():
-        click.echo(report_experiment(spec_path, budget, storage, root, out_dir))
+        click.echo(report_experiment(spec_path, budget, storage, root, out_dir, replace))
 
 
 # ------------------------------------------------------------------------------------------------ bench

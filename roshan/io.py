@@ -43,6 +43,16 @@ def refuse_overwrite(path: str | os.PathLike | None, what: str, replace: bool) -
         raise OutputError(what, path, "the file exists; give --replace to overwrite it, or name a new file")
 
 
+def inside(root: str | os.PathLike, name: str, what: str, option: str = "--name") -> Path:
+    """``root/name`` for a ``name`` a user gave (``--name``): one folder name, so that the folder stays inside
+    ``root`` (``--name ../../escape`` used to write a whole run outside it). Raises :class:`OutputError`."""
+    parts = Path(name).parts
+    if not name or len(parts) != 1 or parts[0] in (".", "..") or "\0" in name or os.sep in name or "/" in name:
+        raise OutputError(what, Path(root) / name, f"{option} {name!r} must be one folder name inside {root} (no "
+                                                  "'/', '.' or '..')")
+    return Path(root) / name
+
+
 def prepare_output(path: str | os.PathLike, what: str, is_dir: bool = True) -> Path:
     """Make sure ``path`` (a folder, or with ``is_dir=False`` a file) can be written before the work that fills
     it starts: missing folders are created and a probe file is created and removed in the folder (permission

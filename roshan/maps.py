@@ -523,6 +523,16 @@ def initial_fire_count(num_cells: int, fire_percentage: float) -> int:
 MIN_DRONE_MAP_SIDE = 3
 
 
+def check_explorer_map(m: LandCoverMap, num_explorers: int) -> None:
+    """Refuse a map whose longer side cannot be split into one meander stripe per explorer (the planner level),
+    with a MapError naming the map, the key and the most explorers it takes."""
+    side = max(m.rows, m.cols)  # the stripes cut the longer side
+    if num_explorers > side:
+        raise MapError(f"map {m.name!r} ({m.rows} x {m.cols} cells): planner.num_explorers = {num_explorers} explorers "
+                       f"cannot share its longer side of {side} cells (one meander stripe each); set "
+                       f"planner.num_explorers to at most {side}, or use a larger map")
+
+
 def check_drone_map(m: LandCoverMap, fire_percentage: float, fights_fire: bool, who: str) -> None:
     """Refuse a map on which ``who`` (an env's description) cannot run a meaningful episode, with a MapError naming
     the map and why: smaller than 3 x 3 cells (no cell for the groundstation), and where the drones' objective is

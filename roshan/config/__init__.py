@@ -76,9 +76,23 @@ class Config(schema.Section):
         super().__post_init__()  # each section is a section of its class (they validated themselves)
         if not self.train.level.flies:
             check_planner_ppo(self.ppo)
+        check_step_counts(self)
 
 
 schema.register_tree(Config)  # errors of a section built in Python name its dotted key ("fly.frames")
+
+
+def check_step_counts(cfg: Config) -> None:
+    """Durations the kernels count in steps of ``fire.dt`` (a battery swap, a tank's refill) must fit their int32
+    counters: ``swap_time=1e9`` used to end in Taichi's "Integer literal ... exceeded the range"."""
+    durations = {"drones.recharge_time": cfg.drones.recharge_time,
+                 "drones.energy.swap_time": cfg.drones.energy.values().get("swap_time", 0.0)}
+    for key, seconds in durations.items():
+        steps = (seconds + 1e-4) / cfg.fire.dt
+        if steps > schema.INT32_MAX:
+            most = schema.INT32_MAX * cfg.fire.dt
+            raise ConfigError(f"{key} = {seconds!r} s is {steps:.3g} steps of fire.dt = {cfg.fire.dt!r} s, more than "
+                              f"a step counter holds; expected at most {most:.4g} s")
 
 
 def check_planner_ppo(ppo: PPOConfig) -> None:

@@ -6,7 +6,7 @@ Reward presets are data (thesis Tables 5.3-5.5, 5.7, 5.9); the ``ti.func``s that
 
 from dataclasses import dataclass, field
 
-from roshan.config.schema import Section, choice, num
+from roshan.config.schema import INT32_MAX, Section, choice, num
 
 # Thesis Table 5.3 (defaults), Table 5.4 (best single Optuna trial), Table 5.5 (mean of the top-10 trials).
 PRESETS: dict[str, dict[str, float]] = {
@@ -102,7 +102,7 @@ class PlannerConfig(Section):
     explorer_model: str = "models/fly_simple"  # frozen FlyAgent for the explorers
     num_explorers: int = num(12, 1, 64, doc="ExploreFlyAgents (thesis 12; the root configs say 3)")
     explorer_speed: float = num(20.0, 0.0, lo_open=True, doc="explorer max speed (m/s)")
-    explorer_view_range: int = num(20, 2, doc="explorer view range (cells); also the meander spacing")
+    explorer_view_range: int = num(20, 2, INT32_MAX, doc="explorer view range (cells); also the meander spacing")
     meander: str = choice("newest", ("newest", "thesis"),
                           doc="explorer sweep: newest (the last stripe reaches the map edge) or thesis (capped "
                               "stripe, docs/model/agents.md §11.1)")
@@ -141,3 +141,15 @@ class PlannerConfig(Section):
     network: str = choice("thesis", ("thesis", "pointer"),
                           doc="the planner network: docs/model/learning.md §3.1 (thesis) or §3.2 (pointer, newest)")
     rewards: PlannerRewardConfig = field(default_factory=PlannerRewardConfig)
+
+    def inert(self, battery: bool) -> list[str]:
+        """Settings that change nothing (or nothing useful) here, each as a warning line (issue 52); ``battery``:
+        the drones carry one (``drones.energy.enabled``)."""
+        out = []
+        if self.planner_resources and not battery:
+            out.append("planner.planner_resources = true does nothing while drones.energy.preset is off: the return "
+                       "rule watches the drones' batteries")
+        if self.max_candidates == 1:
+            out.append("planner.max_candidates = 1 lists the groundstation alone (candidate 0): the planner can choose "
+                       "no fire; 0 lists every cell")
+        return out

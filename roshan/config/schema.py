@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import functools
+import math
 import numbers
 import types
 import typing
@@ -27,6 +28,13 @@ from roshan.io import write_atomic
 
 class ConfigError(ValueError):
     """A config file, key or value is wrong; the message says where and what was expected."""
+
+
+# The kernels compute in float32 and count in int32: a float beyond float32's range is infinity there, and an int
+# beyond int32's wraps. Every float setting must be finite in float32; a setting that ends up in a kernel integer
+# declares INT32_MAX (or less) as its upper bound.
+FLOAT32_MAX = 3.4028234663852886e38
+INT32_MAX = 2**31 - 1
 
 
 def _range(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False, hi_open: bool = False,
@@ -94,7 +102,18 @@ def check_field(f: dataclasses.Field, hint, value, where: str, key: str):
         if not isinstance(value, hint):
             raise ConfigError(f"{where}: {key} must be a {hint.__name__}, got {value!r}")
         return value
-    return _check_value(_coerce(value, hint, where, key), f, where, key)
+    return _check_value(_coerce(_unbool_choice(value, f), hint, where, key), f, where, key)
+
+
+def _unbool_choice(value, f: dataclasses.Field):
+    """YAML 1.1 reads an unquoted ``off`` / ``on`` as false / true: for a field whose choices are the words, give
+    the word back (``preset: off`` means the choice "off", not a type error)."""
+    choices = f.metadata.get("choices") if f.metadata else None
+    if isinstance(value, bool) and choices:
+        word = "on" if value else "off"
+        if word in choices:
+            return word
+    return value
 
 
 # ---------------------------------------------------------------------------------------------- loading
@@ -315,19 +334,34 @@ def _coerce(value: Any, hint, where: str, key: str):
 
 def _check_value(value, f: dataclasses.Field, where: str, key: str):
     meta = f.metadata
+    if isinstance(value, float):
+        _check_finite(value, meta, where, key)
     if not meta or value is None:
         return value
     if meta.get("choices") is not None and value not in meta["choices"]:
         raise ConfigError(f"{where}: {key} = {value!r}; expected one of {', '.join(map(str, meta['choices']))}")
     lo, hi = meta.get("lo"), meta.get("hi")
-    if isinstance(value, (int, float)) and value != value:  # NaN compares false with everything
-        raise ConfigError(f"{where}: {key} is NaN; expected {_range_text(meta)}")
     too_low = lo is not None and (value <= lo if meta["lo_open"] else value < lo)
     too_high = hi is not None and (value >= hi if meta["hi_open"] else value > hi)
     if too_low or too_high:
         raise ConfigError(f"{where}: {key} = {value!r} is out of range; expected {_range_text(meta)}"
                           + (f" ({meta['doc']})" if meta.get("doc") else ""))
     return value
+
+
+def _check_finite(value: float, meta, where: str, key: str) -> None:
+    """Refuse NaN, infinities and floats that float32 (what the kernels compute in) turns into infinities: a range
+    check alone lets ``inf`` through every bound of the form ``> 0``."""
+    if abs(value) <= FLOAT32_MAX:
+        return
+    ranged = meta and (meta.get("lo") is not None or meta.get("hi") is not None)
+    expected = f"expected {_range_text(meta)}" if ranged else "expected a finite number"
+    if value != value:  # NaN compares false with everything
+        raise ConfigError(f"{where}: {key} is NaN; {expected}")
+    if math.isinf(value):
+        raise ConfigError(f"{where}: {key} = {value!r} is infinite; {expected}")
+    raise ConfigError(f"{where}: {key} = {value!r} is beyond float32's range (what the kernels compute in, "
+                      f"up to 3.4e38); {expected}")
 
 
 def _range_text(meta: dict) -> str:

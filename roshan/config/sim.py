@@ -1,8 +1,9 @@
 """The simulator's sections: map, fire physics, wind, initial fires, drones, batch and arch."""
 
+import math
 from dataclasses import dataclass, field
 
-from roshan.config.schema import Section, choice, num
+from roshan.config.schema import INT32_MAX, ConfigError, Section, choice, num
 
 # Upper bounds of the pool sizes: a particle pool of 2^26 (1.3-2.1 GiB per env) serves a map of ~80 million cells
 # burning whole (the reference peaks at 0.4 convection and 0.8 radiation particles per cell), and 2^24 blocks hold
@@ -78,7 +79,7 @@ class IgnitionConfig(Section):
     ``reseed: false``."""
 
     fire_percentage: float = num(0.015, 0.0, 1.0, doc="fraction of all cells to ignite")
-    clusters: int = num(2, 1, doc="number of clusters (or rings)")
+    clusters: int = num(2, 1, INT32_MAX, doc="number of clusters (or rings)")
     spread_prob: float = num(0.5, 0.0, 1.0, doc="base probability that a cluster grows into a neighbour")
     noise: float = num(1.0, 0.0, 2.0, doc="amplitude of the perturbation of spread_prob")
     pattern: str = choice("cluster", ("cluster", "scattered", "ring", "random"),
@@ -125,6 +126,16 @@ class EnergyConfig(Section):
                                         "straight in, out of the others' way: like a landed drone it neither sees "
                                         "nor is seen by them, nor the map's edge (0: off)")
 
+    def __post_init__(self):
+        super().__post_init__()
+        if not self.enabled:  # a value of no battery would be ignored: the drones would fly forever
+            for key in ENERGY_PRESETS["scenario"]:
+                if getattr(self, key) is not None:
+                    raise ConfigError(
+                        f"EnergyConfig: drones.energy.{key} = {getattr(self, key)!r} is set but drones.energy.preset "
+                        "is off (no battery: drones fly forever); choose the preset it overrides "
+                        f"(drones.energy.preset={' or '.join(ENERGY_PRESETS)}) or leave {key} unset")
+
     @property
     def enabled(self) -> bool:
         return self.preset != "off"
@@ -143,7 +154,7 @@ class DroneConfig(Section):
 
     num_drones: int = num(4, 1, 64, doc="drones per env")
     max_speed: float = num(10.0, 0.0, lo_open=True, doc="v_max per axis (m/s)")
-    view_range: int = num(10, 2, doc="view range (cells)")
+    view_range: int = num(10, 2, INT32_MAX, doc="view range (cells)")
     drone_size: float = num(2.0, 0.0, lo_open=True, doc="drone radius used by the collision test (m)")
     use_vel_bins: bool = True  # actions rounded to 41 levels (steps of 0.05)
     use_velocity_change: bool = False  # acceleration mode: v += a * (v_max / 2) * dt
@@ -154,14 +165,36 @@ class DroneConfig(Section):
     energy: EnergyConfig = field(default_factory=EnergyConfig)
 
 
+    def inert(self) -> list[str]:
+        """Settings that change nothing here, each as a warning line (issue 52): set but silent, they read as if
+        they had been applied."""
+        if not self.energy.enabled and self.energy.approach > 0:
+            return [f"drones.energy.approach = {self.energy.approach!r} does nothing while drones.energy.preset is "
+                    "off: only a drone flying home to swap its battery makes the final approach"]
+        return []
+
+    def battery_reach(self) -> float | None:
+        """Metres from the groundstation a full battery can take a drone and bring it back, at the speed that goes
+        farthest on a joule (at most v_max on both axes) with the tank full; None without a battery. No fire
+        farther than this can be put out (issue 52)."""
+        if not self.energy.enabled:
+            return None
+        e = self.energy.values()
+        still = e["hover_power"] + e["payload_power"]  # power at rest; the speed term grows with |v|^2
+        fastest = math.sqrt(2.0) * self.max_speed
+        speed = fastest if e["speed_power"] == 0 else min(fastest, math.sqrt(still / e["speed_power"]))
+        power = still + e["speed_power"] * speed * speed
+        return math.inf if power == 0 else e["capacity"] / power * speed / 2.0
+
+
 @dataclass(frozen=True)
 class MapConfig(Section):
     """Which land-cover map to simulate."""
 
     name: str = "35x36_Woods"  # bundled map name, "uniform", or a path to a CLC+ GeoTIFF
     band: int = num(0, 0, doc="raster band (1-based) for multi-band files; 0 = the only band")
-    uniform_rows: int = num(50, 1, doc="rows of the uniform map")
-    uniform_cols: int = num(50, 1, doc="columns of the uniform map")
+    uniform_rows: int = num(50, 1, INT32_MAX, doc="rows of the uniform map")
+    uniform_cols: int = num(50, 1, INT32_MAX, doc="columns of the uniform map")
 
 
 @dataclass(frozen=True)

@@ -93,6 +93,8 @@ class VectorEnvCore(gym.vector.VectorEnv):
             warnings.warn(f"{self.level_name()}: ignition.fire_percentage = 0 lights no fire at a reset; an episode "
                           "whose fires are not lit by hand (FireSim.ignite_cells) runs until its time limit and "
                           "never counts as a success", stacklevel=4)
+        for line in self.config.drones.inert():  # the same text warns once (Python's default filter)
+            warnings.warn(f"{self.level_name()}: {line}", stacklevel=4)
 
     @property
     def physics_steps_per_step(self) -> int:

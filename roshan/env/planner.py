@@ -7,6 +7,8 @@ the actions, and since fire layouts and wind depend only on the env seed and the
 the heuristic evaluated with the same seed and number of envs play identical initial episodes.
 """
 
+import warnings
+
 import gymnasium as gym
 import numpy as np
 import torch
@@ -19,6 +21,7 @@ from roshan.kernels import observe
 from roshan.kernels.launch import PreparedLaunch
 from roshan.kernels.planner import obs_layout
 from roshan.kernels.pool import take_planner_sims
+from roshan.maps import check_explorer_map
 from roshan.runtime import ensure_taichi, torch_device
 
 
@@ -68,6 +71,8 @@ class PlannerVectorEnv(VectorEnvCore):
                                                                       key="planner.explorer_model")
         ex_frames = self.explorer_policy.frames if self.explorer_policy else 1
         super().__init__(num_envs, config, seed, render_mode)
+        for line in pc.inert(self.config.drones.energy.enabled):  # the same text warns once (Python's default filter)
+            warnings.warn(f"{self.level_name()}: {line}", stacklevel=2)
         n, m = self.num_drones, pc.num_explorers
         self.interval = pc.interval
         self._define_spaces(n)
@@ -84,6 +89,11 @@ class PlannerVectorEnv(VectorEnvCore):
         self._fly_cache = self.fly_policy.new_cache()
         self._explore_cache = self.explorer_policy.new_cache() if self.explorer_policy else None
         self._prepare_launches()
+
+    def _check_map(self) -> None:
+        """The drones' checks of every level, and a map side the explorers' stripes can share."""
+        super()._check_map()
+        check_explorer_map(self.land, self.planner_config.num_explorers)
 
     @property
     def has_energy(self) -> bool:

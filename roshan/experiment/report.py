@@ -17,9 +17,18 @@ import numpy as np
 
 from roshan import reproducible
 from roshan.experiment.findings import findings_markdown
-from roshan.experiment.runner import RESULT_ATTR, experiment_dir, load_experiment, progress, run_key, spec_storage
+from roshan.experiment.runner import (
+    RESULT_ATTR,
+    STUDY_ATTR,
+    check_runs,
+    experiment_dir,
+    load_experiment,
+    progress,
+    run_key,
+    spec_storage,
+)
 from roshan.experiment.spec import Condition, Reference, Spec, load_spec
-from roshan.io import write_atomic, writing
+from roshan.io import OutputError, write_atomic, writing
 from roshan.study.storage import open_storage
 
 RATES = ("success", "collision", "boundary", "timeout", "burnout")
@@ -291,18 +300,46 @@ def write_report(spec: Spec, study, out_dir: str | Path) -> list[dict]:
 
 
 
+REPORT_FILES = ("report.md", "per_seed.csv", "summary.json", "success.png", "runs")
+
+
+def refuse_foreign_outputs(spec: Spec, out: Path) -> None:
+    """Without --replace: a report folder may hold an earlier report of this experiment (a report is a view of the
+    journal: making it again refreshes it), but no other file of a report's names (an evaluation's summary.json,
+    another experiment's report): OutputError naming them and the two ways out."""
+    held = [name for name in REPORT_FILES if (out / name).exists()]
+    if not held:
+        return
+    try:
+        ours = (out / "report.md").read_text().startswith(f"Experiment `{spec.name}` (")
+    except (OSError, UnicodeDecodeError):
+        ours = False
+    if not ours:
+        raise OutputError("the experiment report", out, f"it holds {', '.join(held)} of something other than a report "
+                                                        f"of experiment {spec.name!r}; give --replace to overwrite "
+                                                        "them, or --out DIR to write a new folder")
+
+
 def report_experiment(spec_path: str | Path, budget: str, storage: str | None, root: str | Path,
-                      out_dir: str | Path | None) -> str:
+                      out_dir: str | Path | None, replace: bool = False) -> str:
     """``roshan experiment report``: the report of SPEC's finished runs read from its journal (``storage``, else
     the spec's, else ROOT/NAME/experiment.journal), written to ``out_dir`` (default ROOT/NAME/report); returns what
-    the command prints: the runs' progress, the tables and the files written."""
+    the command prints: the runs' progress, the tables and the files written. A spec whose conditions changed
+    under runs that started is refused as ``experiment run`` refuses it (the old runs would read as the new
+    settings'), and so is a folder holding other files (:func:`refuse_foreign_outputs`) unless ``replace``."""
     spec = load_spec(spec_path, budget)
     url = spec_storage(spec, root, storage)
     if "://" not in url and not Path(url).is_file():
         raise FileNotFoundError(f"{url}: no experiment journal; run `roshan experiment run {spec_path}` first "
                                 "(or give --storage / --root)")
-    study = load_experiment(open_storage(url, heartbeat=None, repair=False), spec.name)
+    # a cut journal is repaired by the command that writes it, naming it: a spec's committed journal is written
+    # only when --storage names it
+    hint = f"`roshan experiment run {spec_path}{' --budget thesis' if budget != 'local' else ''} --storage {url}`"
+    study = load_experiment(open_storage(url, heartbeat=None, repair=False, repair_hint=hint), spec.name)
+    check_runs(spec, study.user_attrs[STUDY_ATTR], study)
     out = Path(out_dir) if out_dir else experiment_dir(root, spec.name) / "report"
+    if not replace:
+        refuse_foreign_outputs(spec, out)
     rows = write_report(spec, study, out)
     p = progress(study, set(spec.fingerprints()))
     return "\n".join([

@@ -36,10 +36,11 @@ from optuna.trial import TrialState
 
 from roshan import reproducible
 from roshan.algos.frozen import load_agent, policy_fn
-from roshan.checkpoints import checkpoint_path
+from roshan.checkpoints import checkpoint_path, resolve_checkpoint
 from roshan.config import Config, dump_config
 from roshan.experiment.spec import Run, Spec, SpecError
 from roshan.io import prepare_output, write_atomic, writing
+from roshan.maps import MapError, load_map
 from roshan.runs.envs import make_env
 from roshan.runs.evaluate import run_episodes, save_buffer, summarize, write_outputs
 from roshan.runs.learners import check_learnable
@@ -77,6 +78,25 @@ def spec_storage(spec: Spec, root: str | Path, storage: str | None = None) -> st
     """Where ``spec``'s runs are recorded: ``--storage``, else the spec's own ``storage`` (a committed journal),
     else ``ROOT/NAME/experiment.journal``."""
     return storage or spec.storage or default_storage(root, spec.name)
+
+
+def run_storage(spec: Spec, root: str | Path, storage: str | None = None,
+                echo: Callable[[str], None] = print) -> str:
+    """Where ``experiment run`` records ``spec``'s runs: ``--storage``; else a spec's committed journal is never
+    written (a plain ``run`` or ``--only`` would add records to a tracked file): the runs go to
+    ROOT/NAME/experiment.journal, made as a copy of it the first time, so its finished runs are kept. A spec whose
+    storage is a URL (a database the machines share) uses it."""
+    if storage or not spec.storage or "://" in spec.storage:
+        return spec_storage(spec, root, storage)
+    copy = Path(default_storage(root, spec.name))
+    committed = Path(spec.storage)
+    if not copy.exists() and committed.is_file():
+        with writing("a copy of the experiment journal", copy):
+            copy.parent.mkdir(parents=True, exist_ok=True)
+            write_atomic(copy, committed.read_bytes())
+        echo(f"experiment {spec.name}: runs are recorded in {copy}, a copy of the spec's journal {committed} (to add "
+             f"them to that one, give --storage {committed})")
+    return str(copy)
 
 
 def run_dir(root: str | Path, name: str, run: Run) -> Path:
@@ -342,6 +362,10 @@ def claim_folder(folder: Path, fingerprint: str) -> None:
     mark = folder / "fingerprint"
     if mark.is_file() and (old := mark.read_text().strip()) != fingerprint:
         aside = folder.with_name(f"{folder.name}.superseded-{old}")
+        n = 1
+        while aside.exists():  # set aside before (settings A -> B -> A -> C): a name of its own, never a collision
+            n += 1
+            aside = folder.with_name(f"{folder.name}.superseded-{old}.{n}")
         folder.rename(aside)
         print(f"{folder}: made under other settings (fingerprint {old}); set aside as {aside}", file=sys.stderr)
     if not mark.is_file():
@@ -456,6 +480,33 @@ def check_trainable(spec: Spec, only: tuple[str, ...] = ()) -> None:
                 raise SpecError(f"{spec.path}: condition {condition.name}: {e}") from None
 
 
+def check_sources(spec: Spec, only: tuple[str, ...] = ()) -> None:
+    """Refuse, before any worker starts, a condition whose map cannot be loaded or whose frozen FlyAgent models
+    (``planner.fly_model`` / ``explorer_model``, for the planner level and the scripted controllers) are missing:
+    found by a worker they failed each seed in turn, naming neither the spec nor the condition."""
+    maps: dict[tuple, str | None] = {}  # a map shared by conditions is read once
+    for condition in spec.conditions:
+        if only and condition.name not in only:
+            continue
+        cfg = condition.run_config(condition.seeds[0])
+        key = (cfg.map.name, cfg.map.band, cfg.map.uniform_rows, cfg.map.uniform_cols)
+        if key not in maps:
+            try:
+                load_map(cfg.map.name, band=cfg.map.band or None, rows=cfg.map.uniform_rows, cols=cfg.map.uniform_cols)
+                maps[key] = None
+            except MapError as e:
+                maps[key] = str(e)
+        if maps[key] is not None:
+            raise SpecError(f"{spec.path}: condition {condition.name}: map.name: {maps[key]}")
+        if cfg.train.level.flies and condition.trains:
+            continue
+        for model in ("fly_model", "explorer_model"):
+            try:
+                resolve_checkpoint(getattr(cfg.planner, model))
+            except FileNotFoundError as e:
+                raise SpecError(f"{spec.path}: condition {condition.name}: planner.{model}: {e}") from None
+
+
 def run_experiment(spec: Spec, root: str | Path = "runs", storage: str | None = None, workers: int = 1,
                    worker_args: list[str] | tuple = (), heartbeat: int | None = 60, max_retry: int | None = 3,
                    echo: Callable[[str], None] = print, poll: float = 1.0, only: tuple[str, ...] = (),
@@ -465,7 +516,8 @@ def run_experiment(spec: Spec, root: str | Path = "runs", storage: str | None = 
     still created, so other runs keep their place for a later call), after queueing the finished runs that
     ``rerun`` names (conditions or runs ``CONDITION/seed_S``) again; returns the study."""
     check_trainable(spec, only)
-    url = spec_storage(spec, root, storage)
+    check_sources(spec, only)
+    url = run_storage(spec, root, storage, echo)
     store = open_storage(url, heartbeat, max_retry, repair=True, echo=echo)
     study = prepare_experiment(store, spec, echo)
     if rerun:

@@ -6,6 +6,8 @@ One record row per env, ``RECORD_FIELDS`` in order; valid where the episode ende
 
 import taichi as ti
 
+from roshan.config import ConfigError
+from roshan.config.schema import INT32_MAX
 from roshan.episode import RECORD_FIELDS
 
 EP_SUCCESS, EP_REASON, EP_STEPS, EP_BURNED, EP_EXTINGUISHED, EP_RETURN, EP_BURNING, EP_LIT = (
@@ -63,6 +65,10 @@ class EpisodeKernels:
     """
 
     def __init__(self, fire, t_max: int):
+        if t_max > INT32_MAX:  # counted in int32 fields: a slow drone or a tiny fire.dt would wrap the count
+            raise ConfigError(f"the episode's step limit T_max = {t_max:.3g} steps (docs/model/agents.md §5) is more "
+                              f"than a step counter holds ({INT32_MAX}); raise drones.max_speed or fire.dt, or lower "
+                              "fly.k_turn")
         self.fire, self.t_max = fire, t_max
         E = fire.num_envs
         self.ended = ti.field(ti.i32, E)  # the episode ended: restart() resets the env

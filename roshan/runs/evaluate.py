@@ -10,6 +10,7 @@ import math
 import shlex
 import sys
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,7 @@ from roshan.runs.collect import next_observation
 from roshan.runs.envs import caption_name, make_env
 from roshan.runs.provenance import code_version, settings_hash
 from roshan.runs.report.files import write_episodes_csv, write_summary_json
+from roshan.runs.report.notes import controller_notes, reach_note
 from roshan.runs.report.plots import plot_comparison, plot_episodes, plot_learning_curves
 from roshan.runs.report.scalars import read_tensorboard_scalars
 from roshan.runs.report.stats import summarize
@@ -316,18 +318,22 @@ def _provenance(target, path: Path, which: str, seed: int, episodes: int, num_en
 
 def write_outputs(episodes: dict, out_dir: Path, title: str, provenance: dict | None = None,
                   reasons: tuple[str, ...] = ("collision", "boundary", "timeout"), dt: float | None = None,
-                  who: str | None = None, say=_quiet) -> dict:
+                  who: str | None = None, say=_quiet, notes: Sequence[str] = ()) -> dict:
     """episodes.csv, summary.json (with ``provenance``) and the plots in ``out_dir``; returns the summary.
     ``reasons`` are the failures the controller's records can hold (``env.failure_reasons``), ``dt`` the seconds
     per step (TTE in seconds), ``who`` the controller named in the plot titles; ``say(line)`` announces the slow
-    part (the plots)."""
+    part (the plots). A result that cannot mean what its rates suggest gets ``summary["notes"]``
+    (:func:`controller_notes`, plus the setting's ``notes``), printed under its table."""
     with writing("evaluation files", out_dir):
-        return _write_outputs(episodes, out_dir, title, provenance, reasons, dt, who, say)
+        return _write_outputs(episodes, out_dir, title, provenance, reasons, dt, who, say, notes)
 
 
-def _write_outputs(episodes: dict, out_dir: Path, title: str, provenance, reasons, dt, who, say) -> dict:
+def _write_outputs(episodes: dict, out_dir: Path, title: str, provenance, reasons, dt, who, say, notes) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = summarize(episodes, reasons=reasons, dt=dt)
+    found = [*notes, *controller_notes(summary, who or "the controller")]
+    if found:  # only where there is something to say: summaries of meaningful results stay as they were
+        summary["notes"] = found
     if provenance is not None:
         summary["provenance"] = provenance
     write_episodes_csv(episodes, out_dir / "episodes.csv")
@@ -426,8 +432,10 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         env.close()
         say = _say if progress_bar else _quiet
         who, reasons, dt = f"{cfg.train.algo} policy", env.failure_reasons, cfg.fire.dt
+        reach = reach_note(cfg.drones.battery_reach(), env.drones.rows, env.drones.cols, env.drones.cell)
+        setting_notes = [reach] if reach else []
         summary = write_outputs(eps, out, f"{run_dir.name} ({path.stem}, {len(eps['time'])} episodes, seed {seed})",
-                                provenance, reasons, dt, who, say)
+                                provenance, reasons, dt, who, say, setting_notes)
         _note_simple_policy(cfg, summary, out)
         write_learning_curves(run_dir, out / "learning_curves.png", f"{run_dir.name}: {who}", cfg.train.level.name, say)
         payload = flyagent_json(summary, env.failure_reasons)
@@ -435,7 +443,7 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
             name, note = baseline_name(baseline, cfg, planner)
             base = write_outputs(base_eps, out / baseline, f"{name} baseline ({len(base_eps['time'])} episodes, "
                                                              f"seed {seed})", provenance, reasons, dt,
-                               f"{name} baseline", say)
+                               f"{name} baseline", say, setting_notes)
             plot_comparison({who: eps, baseline: base_eps}, out, reasons=reasons)
             payload = {"policy": payload, baseline: flyagent_json(base, env.failure_reasons)}
             summary["baseline"] = base

@@ -17,8 +17,9 @@ from tqdm import tqdm
 from roshan.checkpoints import config_of_checkpoint, load_checkpoint, resolve_checkpoint
 from roshan.config import Config, apply_overrides
 from roshan.io import OutputError, write_atomic, writing
-from roshan.maps import LandCoverMap, MapError, check_drone_map, load_map
+from roshan.maps import LandCoverMap, MapError, check_drone_map, check_explorer_map, load_map
 from roshan.runs.evaluate import default_checkpoint, eval_root, evaluate_run, evaluation_name, held_results, output_lock
+from roshan.runs.report.notes import ratio_is_meaningful
 from roshan.runtime import current_arch
 
 SUMMARY_FILES = ("maps.md", "maps.json")
@@ -54,6 +55,8 @@ def check_maps(maps: Sequence[str], trained: Config, overrides: Sequence[str] = 
             land = load_map(cfg.map.name, band=cfg.map.band or None, rows=cfg.map.uniform_rows,
                             cols=cfg.map.uniform_cols)
             check_drone_map(land, cfg.ignition.fire_percentage, _fights_fire(cfg), f"a {cfg.train.algo} evaluation")
+            if not cfg.train.level.flies:
+                check_explorer_map(land, cfg.planner.num_explorers)
         except MapError as exc:
             raise MapError(f"--maps: map {spec!r} cannot be evaluated: {exc}") from exc
         if land.name in lands:
@@ -104,14 +107,17 @@ def map_row(name: str, land: LandCoverMap, summary: dict) -> dict:
     row = {"map": name, "source": str(land.source) if land.source else name, "rows": land.rows, "cols": land.cols,
            "cells": land.rows * land.cols, "episodes": summary["episodes"], "folder": name,
            "policy": controller_figures(summary)}
+    notes = list(summary.get("notes", ()))
     if "baseline" in summary:
         row["baseline"] = {"name": summary["baseline_name"], **controller_figures(summary["baseline"])}
         mine, theirs = row["policy"]["tte_median"], row["baseline"]["tte_median"]
-        # With no success, a controller's median TTE is its time limit: a ratio of time limits says nothing.
-        succeeded = row["policy"]["success_rate"] > 0 and row["baseline"]["success_rate"] > 0
-        row["tte_median_ratio"] = mine / theirs if succeeded and mine is not None and theirs else None
-        if not succeeded:
+        meaningful = ratio_is_meaningful(summary, summary["baseline"])
+        row["tte_median_ratio"] = mine / theirs if meaningful and mine is not None and theirs else None
+        notes += [n for n in summary["baseline"].get("notes", ()) if n not in notes]
+        if not meaningful:  # with no success, a controller's median TTE is its time limit
             row["tte_median_ratio_note"] = NO_SUCCESS
+    if notes:
+        row["notes"] = notes
     return row
 
 
@@ -159,7 +165,8 @@ def format_maps_table(rows: Sequence[dict], title: str) -> str:
         if base:
             cells.append(r.get("tte_median_ratio_note") or _number(r.get("tte_median_ratio"), 2))
         lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+    notes = [f"- {r['map']}: {n}" for r in rows for n in r.get("notes", ())]
+    return "\n".join(lines + (["", "Notes:", *notes] if notes else []))
 
 
 def write_suite_summary(rows: Sequence[dict], out_dir: Path, title: str, provenance: dict) -> str:

@@ -13,15 +13,32 @@ from roshan.checkpoints import (
     load_checkpoint,
     new_run_dir,
     newest_checkpoint,
+    resolve_checkpoint,
 )
 from roshan.config import Config, apply_overrides, dump_config
+from roshan.runs.learners import check_learnable
 
 
 def start_run(cfg: Config, root: str | Path = "runs", name: str | None = None) -> Path:
-    """Create the run folder and write the resolved config."""
+    """Create the run folder and write the resolved config, once what the run starts from is known to fit
+    (:func:`check_init_from`) and its rollout can be collected (``check_learnable``): a refused start leaves no
+    empty run folder behind."""
+    check_learnable(cfg)
+    check_init_from(cfg)
     run_dir = new_run_dir(root, name or f"{cfg.train.algo}_{time.strftime('%Y%m%d-%H%M%S')}")
     dump_config(cfg, run_dir / "config.yaml")
     return run_dir
+
+
+def check_init_from(cfg: Config) -> None:
+    """Refuse ``train.init_from`` weights that cannot serve ``cfg`` (another level, network shape or battery) before
+    the run folder is made; the trainer loads them again when it starts."""
+    if not cfg.train.init_from:
+        return
+    path = resolve_checkpoint(cfg.train.init_from)
+    state = load_checkpoint(path)
+    check_fits(make_agent(cfg), state["agent"], cfg, config_of_checkpoint(state, str(path)), str(path),
+               weights_only=True)
 
 
 def resume_config(run_dir: str | Path, overrides: list[str] | tuple[str, ...] = ()) -> Config:

@@ -164,7 +164,7 @@ def open_for_report(target: str, root: str | Path = "runs", name: str | None = N
         return study, study_dir(root, name) / "report"
     path = Path(target)
     if not path.exists():
-        path = study_dir(root, target)
+        path = Path(root) / target  # read, not written: a name that is no folder is "no study found" below
     journal = path / JOURNAL_NAME if path.is_dir() else path
     if not journal.is_file():
         raise StudyError(f"{target}: no study found (looked for {journal}); give a study name under --root, a study "

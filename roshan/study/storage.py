@@ -198,17 +198,19 @@ def _cut_line(path: Path) -> int | None:
     return len(lines) + 1 if tail else None
 
 
-def check_journal(path: str | Path, repair: bool = False, echo: Callable[[str], None] | None = None) -> None:
+def check_journal(path: str | Path, repair: bool = False, echo: Callable[[str], None] | None = None,
+                  repair_hint: str | None = None) -> None:
     """Find a journal whose last record was cut (a full disk or a killed write leaves one; once another record
     is appended after it the journal is unreadable for good). With ``repair`` the original is copied to
-    ``<journal>.damaged-<time>`` and the cut line dropped; otherwise a StudyError names the journal and the fix."""
+    ``<journal>.damaged-<time>`` and the cut line dropped; otherwise a StudyError names the journal and the fix
+    (``repair_hint``: the command that repairs it, default the study's)."""
     path = Path(path)
     if not path.is_file():
         return
     if not repair:  # no lock: a report may read a journal in a folder it cannot write
         number = _cut_line(path)
         if number is not None:
-            _repair_journal(path, number, repair, echo)
+            _repair_journal(path, number, repair, echo, repair_hint)
         return
     # Under the journal's own lock, so that another worker's append in progress is not taken for a cut record.
     with writing("the study journal's lock", path), get_lock_file(JournalFileSymlinkLock(str(path))):
@@ -217,12 +219,13 @@ def check_journal(path: str | Path, repair: bool = False, echo: Callable[[str], 
             _repair_journal(path, number, repair, echo)
 
 
-def _repair_journal(path: Path, number: int, repair: bool, echo: Callable[[str], None] | None) -> None:
+def _repair_journal(path: Path, number: int, repair: bool, echo: Callable[[str], None] | None,
+                    repair_hint: str | None = None) -> None:
     if not repair:
+        hint = repair_hint or (f"`roshan study run --resume --name {path.parent.name} --root {path.parent.parent}` "
+                               f"(with --storage {path} if it is not the default journal)")
         raise StudyError(f"{path}: the last record (line {number}) of the study journal is cut (a full disk or a "
-                         f"killed write?); `roshan study run --resume --name {path.parent.name} --root "
-                         f"{path.parent.parent}` (with --storage {path} if it is not the default journal) drops it, "
-                         "keeping a copy of the original")
+                         f"killed write?); {hint} drops it, keeping a copy of the original")
     data = path.read_bytes()
     whole = data[:data.rstrip(b"\n").rfind(b"\n") + 1]  # up to and including the last whole line's newline
     copy_path = path.with_name(f"{path.name}.damaged-{time.strftime('%Y%m%d-%H%M%S')}")
@@ -235,7 +238,7 @@ def _repair_journal(path: Path, number: int, repair: bool, echo: Callable[[str],
 
 
 def open_storage(storage: str, heartbeat: int | None = 60, max_retry: int | None = 3, repair: bool | None = None,
-                 echo: Callable[[str], None] | None = None):
+                 echo: Callable[[str], None] | None = None, repair_hint: str | None = None):
     """A journal file (a path) or an RDB storage (a SQLAlchemy URL such as ``postgresql://user:pw@host/db``),
     with heartbeats every ``heartbeat`` s (None: off) and up to ``max_retry`` retries of stale trials.
     A journal's cut last record is dropped (``repair=True``, told to ``echo``) or refused (``False``, see
@@ -252,7 +255,7 @@ def open_storage(storage: str, heartbeat: int | None = 60, max_retry: int | None
     if not is_url(storage):
         path = Path(storage)
         if repair is not None:
-            check_journal(path, repair, echo)
+            check_journal(path, repair, echo, repair_hint)
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             if heartbeat:

@@ -14,13 +14,14 @@ from typing import Any
 import optuna
 from optuna.trial import TrialState
 
+from roshan.io import inside
 from roshan.study.errors import StudyError
 from roshan.study.recipe import RECIPE_ATTR, Recipe, recipe_of
 from roshan.study.storage import JOURNAL_NAME, WORKER_ATTR, experimental
 
 
 def study_dir(root: str | Path, name: str) -> Path:
-    return Path(root) / name
+    return inside(root, name, "the study folder")
 
 
 def default_storage(root: str | Path, name: str) -> str:

@@ -11,9 +11,11 @@ from click.testing import CliRunner
 from PIL import Image
 
 from roshan.cli import main
+from roshan.io import OutputError
 from roshan.kernels.annotate import BAND_COLOUR
 from roshan.kernels.render import drone_colours
 from roshan.runs.evaluate import eval_root
+from roshan.study.studies import study_dir
 
 ROOT = Path(__file__).resolve().parents[2]
 MODEL = ROOT / "models" / "fly_simple"
@@ -63,3 +65,31 @@ def test_readme_eval_and_watch_commands_write_only_under_out(tmp_path, monkeypat
     assert (shot[:6] == BAND_COLOUR).all(-1).mean() > 0.5
     for colour in drone_colours(2):
         assert (shot == colour).all(-1).sum() >= 20, f"drone colour {colour} missing from the screenshot"
+
+
+@pytest.mark.parametrize("name", ["../../escape", "a/b", "..", ".", "/tmp/abs"])
+def test_a_run_name_stays_inside_root(tmp_path, name):
+    # issue 52: `roshan train configs/fly_simple.yaml --root R --name ../../escape` wrote a whole run outside R
+    root = tmp_path / "deep" / "R"
+    res = cli("train", ROOT / "configs" / "fly_simple.yaml", "--root", root, "--name", name, "--set",
+              "train.max_updates=1")
+    assert res.exit_code == 1 and f"--name {name!r} must be one folder name inside {root}" in res.output
+    assert not (tmp_path / "deep").exists() and not (tmp_path / "escape").exists()
+
+
+def test_a_study_name_stays_inside_root(tmp_path):
+    with pytest.raises(OutputError, match=r"--name '\.\./x' must be one folder name inside"):
+        study_dir(tmp_path, "../x")
+    assert study_dir(tmp_path, "fly-ppo") == tmp_path / "fly-ppo"
+
+
+def test_init_from_weights_that_do_not_fit_leave_no_run_folder(tmp_path):
+    # issue 52: train.init_from refused for a battery mismatch still left an empty run folder
+    res = cli("train", ROOT / "configs" / "planner.yaml", "--root", tmp_path / "R", "--name", "x", "--set",
+              f"train.init_from={ROOT / 'models' / 'planner_endurance'}")
+    assert res.exit_code == 1 and "drones.energy.enabled = False here but True in the checkpoint" in res.output
+    assert not (tmp_path / "R").exists()
+    res = cli("train", ROOT / "configs" / "fly_simple.yaml", "--root", tmp_path / "R", "--set", "ppo.horizon=40",
+              "--set", "sim.envs=4")  # a rollout that does not split over the envs: refused before the folder too
+    assert res.exit_code == 1 and "ppo.horizon = 40 must be a positive multiple" in res.output
+    assert not (tmp_path / "R").exists()

@@ -18,6 +18,7 @@ from roshan.config import (
     all_keys,
     load_config,
 )
+from roshan.kernels.episode import EpisodeKernels
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
@@ -131,3 +132,62 @@ def test_an_empty_config_file_is_an_error(tmp_path, text):
 def test_other_libraries_key_names_suggest_ours():
     with pytest.raises(ConfigError, match="did you mean 'ppo.lr'"):
         load_config(None, ["ppo.learning_rate=1e-4"])
+
+
+# issue 52: infinities passed every range check of the form "> 0" and ended in an OverflowError in the drone kernels
+# (swap_time, recharge_time) or in a battery that never drains (capacity, 1e40 being inf in float32).
+@pytest.mark.parametrize("override, words", [
+    ("drones.energy.swap_time=inf", ["drones.energy.swap_time = inf is infinite", ">= 0.0"]),
+    ("drones.recharge_time=inf", ["drones.recharge_time = inf is infinite"]),
+    ("drones.energy.capacity=inf", ["drones.energy.capacity = inf is infinite", "> 0.0"]),
+    ("drones.energy.capacity=-.inf", ["drones.energy.capacity = -inf is infinite"]),
+    ("drones.energy.capacity=1e40", ["drones.energy.capacity = 1e+40 is beyond float32"]),
+    ("drones.energy.hover_power=inf", ["drones.energy.hover_power = inf is infinite"]),
+    ("drones.max_speed=inf", ["drones.max_speed = inf is infinite"]),
+    ("fly.rewards.goal=inf", ["fly.rewards.goal = inf is infinite", "a finite number"]),  # a field with no range
+    ("fly.rewards.goal=.nan", ["fly.rewards.goal is NaN"]),
+])
+def test_infinities_are_refused_naming_the_key(override, words):
+    with pytest.raises(ConfigError) as err:
+        load_config(None, ["drones.energy.preset=scenario", override])
+    for w in words:
+        assert w in str(err.value)
+
+
+@pytest.mark.parametrize("override, words", [
+    ("drones.energy.swap_time=1e9", ["drones.energy.swap_time = 1000000000.0 s", "fire.dt = 0.1", "at most"]),
+    ("drones.recharge_time=1e9", ["drones.recharge_time = 1000000000.0 s"]),
+    ("drones.view_range=3000000000", ["drones.view_range", "out of range", "2147483647"]),
+    ("ignition.clusters=3000000000", ["ignition.clusters", "out of range"]),
+])
+def test_settings_counted_in_kernel_integers_have_an_upper_bound(override, words):
+    with pytest.raises(ConfigError) as err:
+        load_config(None, ["drones.energy.preset=scenario", override])
+    for w in words:
+        assert w in str(err.value)
+
+
+def test_battery_values_without_a_preset_are_refused():
+    # issue 52: they were ignored and the drones flew forever, although the README says any value can be set alone
+    with pytest.raises(ConfigError, match=r"drones\.energy\.capacity = 1\.0 is set but drones\.energy\.preset is off"
+                                          r".*scenario or realistic"):
+        load_config(None, ["drones.energy.capacity=1"])
+    assert load_config(None, ["drones.energy.preset=scenario", "drones.energy.capacity=1"]).drones.energy.values()[
+        "capacity"] == 1.0
+
+
+def test_off_unquoted_reads_as_the_preset_off(tmp_path):
+    # issue 52: YAML 1.1 reads an unquoted off as false, refused as "must be str, got False"
+    path = tmp_path / "off.yaml"
+    path.write_text("drones:\n  energy:\n    preset: off\n")
+    assert load_config(path).drones.energy.preset == "off"
+    cfg = load_config(None, ["drones.energy.preset=scenario", "drones.energy.preset=off"])
+    assert cfg.drones.energy.preset == "off"
+    with pytest.raises(ConfigError, match="drones.energy.preset must be str, got True"):  # no choice named "on"
+        load_config(None, ["drones.energy.preset=yes"])
+
+
+def test_a_step_limit_beyond_int32_is_refused():
+    # a drone of 1e-30 m/s gave a T_max of 3e34 steps, wrapped in the kernels' int32 counters
+    with pytest.raises(ConfigError, match="step limit T_max = 3e.34 steps.*raise drones.max_speed"):
+        EpisodeKernels(None, 3 * 10**34)

@@ -104,3 +104,12 @@ def test_the_simple_flyagent_needs_no_fire():
     # its objective is a goal (a fire or a corner): a small map without fires stays valid
     env = FlyVectorEnv(1, uniform(8, 8, drones=DroneConfig(num_drones=1)))
     env.close()
+
+
+def test_more_explorers_than_a_map_side_names_the_map_and_the_fix():
+    # issue 52: a 3x3 map read "12 explorers on a map side of 3 cells", naming neither the map nor the fix
+    pc = PlannerConfig(interval=1, fly_model=MODEL, explorer_model=MODEL, num_explorers=12)
+    with pytest.raises(MapError, match=r"map 'uniform' \(3 x 3 cells\): planner.num_explorers = 12 explorers cannot "
+                                       r"share its longer side of 3 cells .*set planner.num_explorers to at most 3"):
+        PlannerVectorEnv(1, uniform(3, 3, ignition=IgnitionConfig(fire_percentage=0.5)), pc, evaluation=True,
+                         controller="greedy", seed=0)

@@ -19,11 +19,20 @@ import optuna
 import pytest
 
 from roshan.experiment.findings import verdict
-from roshan.experiment.report import condition_rows, done_results, markdown, per_seed_csv, rate, results_of
+from roshan.experiment.report import (
+    condition_rows,
+    done_results,
+    markdown,
+    per_seed_csv,
+    rate,
+    report_experiment,
+    results_of,
+)
 from roshan.experiment.runner import (
     RERUN_ATTR,
     STUDY_ATTR,
     check_runs,
+    check_sources,
     check_trainable,
     claim_folder,
     prepare_experiment,
@@ -32,9 +41,11 @@ from roshan.experiment.runner import (
     run_dir,
     run_experiment,
     run_key,
+    run_storage,
     run_worker,
 )
 from roshan.experiment.spec import Reference, SpecError, load_spec
+from roshan.io import OutputError
 from roshan.study.storage import open_storage
 
 REPO = Path(__file__).resolve().parents[2]
@@ -764,3 +775,98 @@ def test_the_success_plot_stays_one_page_wide_and_names_conditions_not_run(tmp_p
         assert len(not_run) == len(spec.conditions) - 1  # every condition but `fast`
     finally:
         plt.close(fig)
+
+
+def test_a_folder_set_aside_twice_under_one_fingerprint_gets_a_name_of_its_own(tmp_path):
+    # issue 52: a failed run whose condition went A -> B -> A -> C failed from then on with "[Errno 39] Directory not
+    # empty: '.../seed_0' -> '...superseded-<A>'" and "fix the cause and continue" looped
+    folder = tmp_path / "fast" / "seed_0"
+    for fingerprint in ("A", "B", "A", "C"):
+        claim_folder(folder, fingerprint)
+    assert (folder / "fingerprint").read_text().strip() == "C"
+    assert sorted(p.name for p in folder.parent.iterdir()) == [
+        "seed_0", "seed_0.superseded-A", "seed_0.superseded-A.2", "seed_0.superseded-B"]
+
+
+def test_the_report_refuses_a_spec_changed_under_its_runs_as_run_does(tmp_path):
+    # issue 52: `experiment report` printed the old runs under the new settings, with no warning
+    spec_path = write_spec(tmp_path)
+    spec, url, _ = start(spec_path, tmp_path)
+    run_worker(spec, url, tmp_path, execute=recording_execute(tmp_path / "log"))  # fast/seed_0 has run
+    spec_path.write_text(spec_path.read_text().replace("train.max_updates: 3", "train.max_updates: 4"))
+    with pytest.raises(SpecError, match=r"runs made with other settings under the same keys \(fast/seed_0\)"):
+        report_experiment(spec_path, "local", url, tmp_path, tmp_path / "report")
+    assert not (tmp_path / "report").exists()
+
+
+def test_the_report_overwrites_only_its_own_earlier_report_unless_replace(tmp_path):
+    # issue 52: `experiment report SPEC --out DIR` into an evaluation's folder replaced its summary.json
+    spec_path = write_spec(tmp_path)
+    spec, url, _ = start(spec_path, tmp_path)
+    run_worker(spec, url, tmp_path, execute=recording_execute(tmp_path / "log"))
+    evaluation = tmp_path / "eval"
+    evaluation.mkdir()
+    (evaluation / "summary.json").write_text('{"episodes": 100}\n')
+    with pytest.raises(OutputError, match=r"it holds summary\.json of something other than a report of experiment "
+                                          r"'demo'; give --replace"):
+        report_experiment(spec_path, "local", url, tmp_path, evaluation)
+    assert (evaluation / "summary.json").read_text() == '{"episodes": 100}\n'
+    report_experiment(spec_path, "local", url, tmp_path, evaluation, replace=True)
+    assert (evaluation / "report.md").read_text().startswith("Experiment `demo` (")
+    report_experiment(spec_path, "local", url, tmp_path, evaluation)  # its own report: refreshed
+
+
+def test_a_committed_journal_is_written_only_when_named_as_storage(tmp_path):
+    # issue 52: `experiment run configs/experiments/endurance.yaml --only ...` on a finished condition added records to
+    # the committed, tracked journal, because the spec names it as its storage
+    journal = tmp_path / "committed" / "experiment.journal"
+    journal.parent.mkdir()
+    spec_path = write_spec(tmp_path, SPEC.replace("name: demo", f"name: demo\nstorage: {journal}"))
+    spec = load_spec(spec_path)
+    prepare_experiment(open_storage(str(journal), heartbeat=60), spec)
+    run_worker(spec, str(journal), tmp_path, execute=recording_execute(tmp_path / "log"))
+    committed = journal.read_bytes()
+    said = []
+    url = run_storage(spec, tmp_path / "root", echo=said.append)
+    assert url == str((tmp_path / "root" / "demo" / "experiment.journal").resolve())
+    assert said == [f"experiment demo: runs are recorded in {url}, a copy of the spec's journal {journal} (to add "
+                    f"them to that one, give --storage {journal})"]
+    study = prepare_experiment(open_storage(url, heartbeat=60), spec)
+    run_worker(spec, url, tmp_path, execute=recording_execute(tmp_path / "log"))
+    assert progress(study)["done"] == 2  # the committed journal's finished run is kept in the copy
+    assert journal.read_bytes() == committed
+    assert run_storage(spec, tmp_path / "root", echo=said.append) == url and len(said) == 1  # made once
+    assert run_storage(spec, tmp_path / "root", str(journal)) == str(journal)  # named: written
+
+
+def test_a_cut_journal_names_the_experiment_command_that_repairs_it(tmp_path):
+    # issue 52: `experiment report` suggested `roshan study run --resume --name j --root .`, a study command with the
+    # wrong name; the repair is `roshan experiment run SPEC`
+    spec_path = write_spec(tmp_path)
+    spec, url, _ = start(spec_path, tmp_path)
+    with open(url, "ab") as f:
+        f.write(b'{"op_code": 5, "cut')
+    with pytest.raises(ValueError,
+                       match=rf"of the study journal is cut .*; `roshan experiment run {re.escape(str(spec_path))} "
+                             rf"--storage {re.escape(url)}` drops it"):
+        report_experiment(spec_path, "local", url, tmp_path, tmp_path / "report")
+
+
+@pytest.mark.parametrize("change, message", [
+    ("config: {planner}\n    controller: greedy", None),  # the spec as it is
+    ("config: {planner}\n    controller: greedy\n    set: {{map.name: no_such_map}}",
+     r"spec.yaml: condition greedy: map.name: .*no_such_map"),
+    ("config: {planner}\n    controller: greedy\n    set: {{planner.fly_model: models/nothing}}",
+     r"spec.yaml: condition greedy: planner.fly_model: models/nothing: no such run folder or checkpoint file"),
+])
+def test_a_bad_map_or_model_in_a_spec_is_refused_before_any_worker_starts(tmp_path, change, message, monkeypatch):
+    # issue 52: a bad map or fly_model in a spec was found only by the worker
+    monkeypatch.chdir(REPO)  # the configs' models/ paths are relative to the checkout
+    spec = load_spec(write_spec(tmp_path, SPEC.replace("config: {planner}\n    controller: greedy", change)))
+    if message is None:
+        check_sources(spec)
+        return
+    storage = tmp_path / "journal"
+    with pytest.raises(SpecError, match=message):
+        run_experiment(spec, tmp_path, str(storage), echo=lambda _: None)
+    assert not storage.exists()

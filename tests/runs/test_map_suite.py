@@ -9,8 +9,11 @@ import pytest
 from click.testing import CliRunner
 
 from roshan.cli import main
+from roshan.config import load_config
 from roshan.runs.map_suite import map_row, write_suite_summary
+from roshan.runs.report.notes import controller_notes, reach_note
 from roshan.runs.report.stats import summarize
+from roshan.runs.report.tables import format_comparison
 
 ROOT = Path(__file__).resolve().parents[2]
 PLANNER = ROOT / "models/planner"
@@ -115,3 +118,42 @@ def test_a_tte_ratio_without_successes_reads_n_a(tmp_path):
         table = write_suite_summary([row], tmp_path, "suite", {"command": "roshan eval"})
         assert table.splitlines()[-1].endswith("| n/a: no episode succeeded |")
         assert "1.00" not in table.splitlines()[-1]
+
+
+def test_results_that_cannot_mean_anything_say_so(tmp_path):
+    # issue 52: borkenberge_heath with the default battery: both controllers flew home 141 times and put out no
+    # cell, and the row read 0 % against 0 % with a TTE ratio of 1.00
+    from roshan.maps import load_map
+
+    def summary(success, extinguished, swaps, energy):
+        n = len(success)
+        reasons = ["none" if s else "timeout" for s in success]
+        return summarize({"time": [9680] * n, "success": success, "reason": reasons,
+                          "extinguished": extinguished, "drones_lost": [0] * n, "battery_swaps": swaps,
+                          "energy_used": energy, "base_time": [0.0] * n}, reasons=("timeout",), dt=0.1)
+
+    failed = summary([0, 0], [0, 0], [70, 71], [9e5, 9e5])
+    failed["notes"] = controller_notes(failed, "planner policy")
+    failed |= {"baseline_name": "greedy (fixed)", "baseline": summary([0, 0], [0, 0], [0, 0], [0.0, 0.0])}
+    failed["baseline"]["notes"] = controller_notes(failed["baseline"], "greedy")
+    assert failed["notes"] == ["planner policy put out no cell in any of its 2 episodes (its drones flew home 141 "
+                               "times): its rates say nothing about how it fights fire"]
+    assert "greedy never left the base: its drones drew 0 J in every episode" in failed["baseline"]["notes"]
+    row = map_row("15x15_Woods", load_map("15x15_Woods"), failed)
+    assert row["tte_median_ratio"] is None
+    table = write_suite_summary([row], tmp_path, "suite", {"command": "roshan eval"})
+    assert table.endswith("| n/a: no episode succeeded |" + "".join(f"\n{line}" for line in [
+        "", "Notes:", f"- 15x15_Woods: {failed['notes'][0]}",
+        *(f"- 15x15_Woods: {n}" for n in failed["baseline"]["notes"])]))
+    assert "note: planner policy put out no cell" in format_comparison({"policy": failed,
+                                                                        "greedy": failed["baseline"]})
+
+
+def test_fires_out_of_the_battery_s_range_are_named():
+    reach = load_config(None, ["drones.energy.preset=scenario"]).drones.battery_reach()
+    assert reach == pytest.approx(15000 / 170 * 10 * 2**0.5 / 2)  # the README's 88 s at full speed, out and back
+    assert reach_note(reach, 36, 35, 10.0) is None  # scenario is scaled to 35x36_Woods: every cell in reach
+    note = reach_note(reach, 100, 110, 10.0)
+    assert note.startswith("fires out of the battery's range: a full battery takes a drone at most 624 m out and "
+                           "back, and the map's far corner is 1444 m from the groundstation")
+    assert load_config().drones.battery_reach() is None and reach_note(None, 100, 110, 10.0) is None

@@ -28,6 +28,8 @@ def _mean_std_median(stats: dict, decimals: int, scale: float = 1.0, unit: str =
 
 
 def _rate_label(reason: str) -> str:
+    if reason == "lost":  # an episode fails as lost once every drone is down; the drones lost per episode are a row
+        return "All drones lost rate"
     return f"{LABELS[reason]} rate"
 
 
@@ -38,6 +40,8 @@ def _row_values(summary: dict) -> dict[str, str]:
             "Success rate": f"{_pct(summary['success_rate'])} [{100 * lo:.1f}, {100 * hi:.1f}]"}
     for reason, rate in summary["failure_rates"].items():
         rows[_rate_label(reason)] = _pct(rate)
+    if "drones_lost" in summary:  # with a battery: 50 of 64 drones down reads 0.0 % in the rate above (issue 52)
+        rows["Drones lost (per episode)"] = _mean_std_median(summary["drones_lost"], 2)
     rows["TTE (steps)"] = _mean_std_median(summary["tte"], 1)
     if "tte_seconds" in summary:
         rows["TTE (s)"] = _mean_std_median(summary["tte_seconds"], 1)
@@ -73,7 +77,7 @@ def format_table(summary: dict, title: str = "Evaluation") -> str:
     Rates are percentages (the success rate with its Wilson interval in brackets); TTE, reward and the fire read
     "mean ± std (median)".
     """
-    return _render(title, ["Value"], [_row_values(summary)])
+    return _render(title, ["Value"], [_row_values(summary)]) + _notes([summary])
 
 
 def format_comparison(summaries: Mapping[str, dict], title: str = "Comparison") -> str:
@@ -90,4 +94,10 @@ def format_comparison(summaries: Mapping[str, dict], title: str = "Comparison") 
         for reason in ("unspecified", "burnout"):
             if any(_rate_label(reason) in other for other in columns):
                 col.setdefault(_rate_label(reason), _pct(0.0))
-    return _render(title, [str(name) for name in summaries], columns)
+    return _render(title, [str(name) for name in summaries], columns) + _notes(summaries.values())
+
+
+def _notes(summaries) -> str:
+    """The summaries' notes (:mod:`roshan.runs.report.notes`), each once, as lines under the table."""
+    notes = list(dict.fromkeys(n for s in summaries for n in s.get("notes", ())))
+    return "".join(f"\nnote: {n}" for n in notes)

@@ -189,6 +189,15 @@ def test_tables_show_only_what_the_controller_measures():
     assert "Collision rate" not in row
 
 
+def test_tables_show_the_drones_lost_per_episode_beside_the_rate_of_episodes_that_lost_all():
+    # issue 52: 64 drones, 50 of them lost in every episode, read "Drones lost rate 0.0 %" beside 100 % success
+    eps = {"time": [400] * 4, "success": [1] * 4, "reason": ["none"] * 4, "drones_lost": [50, 50, 48, 52]}
+    rows = table_rows(report.format_table(report.summarize(eps, reasons=("timeout", "burnout", "lost"))))
+    assert rows["All drones lost rate"] == "0.0 %"
+    assert rows["Drones lost (per episode)"] == "50.00 ± 1.63 (50.00)"  # sample std
+    assert "Drones lost rate" not in rows
+
+
 def test_outcome_plots_show_every_reason_the_controller_can_have(tmp_path):
     from roshan.runs.report.plots import _categories
 
