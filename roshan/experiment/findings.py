@@ -189,7 +189,13 @@ class Judged:
     rhs: Interval | None  # None: the check compares with a number
     diff: Interval
     outcome: str
-    reason: str = ""
+    saturated_at: float | None = None  # not resolved with both rates at this bound (0 or 100 %); else a tie
+
+    @property
+    def reason(self) -> str:
+        if self.outcome != "not resolved":
+            return ""
+        return TIE if self.saturated_at is None else f"{SATURATED}, both at {self.saturated_at:g} %"
 
     @property
     def statistic(self) -> str:
@@ -225,19 +231,19 @@ def judge(check: Check, lhs: list[np.ndarray], rhs: list[np.ndarray] | None) -> 
     wants_more = check.op.startswith(">")
     if diff.lo > 0 or diff.hi < 0:
         return Judged(check, a, b, diff, "holds" if (diff.lo > 0) == wants_more else "fails")
-    return Judged(check, a, b, diff, "not resolved", _saturation(check, lhs, rhs) or TIE)
+    return Judged(check, a, b, diff, "not resolved", _saturation(check, lhs, rhs))
 
 
-def _saturation(check: Check, lhs: list[np.ndarray], rhs: list[np.ndarray] | None) -> str:
-    """'both at 100 %' (or 0 %) where both sides are rates pinned at the same bound, else ''."""
+def _saturation(check: Check, lhs: list[np.ndarray], rhs: list[np.ndarray] | None) -> float | None:
+    """100 (or 0) where both sides are rates pinned at that bound, else None."""
     if check.figure.startswith("tte_") or (check.other_figure or "").startswith("tte_"):
-        return ""
+        return None
     sides = [100.0 * _counts(lhs)[0] / _counts(lhs)[1],
              check.number if rhs is None else 100.0 * _counts(rhs)[0] / _counts(rhs)[1]]
     for bound in (0.0, 100.0):
         if all(s == bound for s in sides):
-            return f"{SATURATED}, both at {bound:g} %"
-    return ""
+            return bound
+    return None
 
 
 @dataclass(frozen=True)
@@ -275,7 +281,9 @@ def verdict(finding: Finding, by_condition: dict[str, list[dict]], weights: str)
     elif by["not resolved"]:
         ties = [j for j in by["not resolved"] if j.reason == TIE]
         lead, label = (ties or by["not resolved"])[0], "not resolved"
-        reasons = "; ".join(sorted({j.reason for j in by["not resolved"]}, key=lambda r: (r != TIE, r)))
+        bounds = sorted({j.saturated_at for j in by["not resolved"] if j.saturated_at is not None}, reverse=True)
+        saturated = f"{SATURATED}, both at {' % or '.join(f'{b:g}' for b in bounds)} %"
+        reasons = "; ".join(([TIE] if ties else []) + ([saturated] if bounds else []))
     else:
         lead, label = min(judged, key=lambda j: j.margin), "confirmed"
     counts = ", ".join(f"{len(v)} {_PLURAL[o] if len(v) > 1 else o}" for o, v in by.items() if v)
@@ -294,11 +302,13 @@ def setting_line(name: str, results: list[dict], thesis: dict) -> str:
     s = estimate(success, "success")
     pooled = np.concatenate(tte)
     parts = [f"{name} succeeds in {s.value:.1f} % of {n} episodes (95 % CI [{s.lo:.1f}, {s.hi:.1f}])"]
+    easier = []  # +1: ours easier on that figure, -1: harder, 0: within noise
     if "success" in thesis:
         ref = thesis["success"].mean
         lo, hi = newcombe_interval(k, n, int(round(ref * n / 100)), n)
         parts[-1] += (f" against the thesis's {ref:g} %: {s.value - ref:+.1f} points, 95 % CI "
                       f"[{100 * lo:+.1f}, {100 * hi:+.1f}]")
+        easier.append(int(lo > 0) - int(hi < 0))
     parts.append(f"its TTE is {pooled.mean():.0f} ± {pooled.std():.0f} ({np.median(pooled):.0f}) steps")
     ref = thesis.get("tte")
     if ref is not None and ref.std is not None:
@@ -306,6 +316,11 @@ def setting_line(name: str, results: list[dict], thesis: dict) -> str:
         lo, hi = welch_interval(ours, MeanPart(ref.mean, ref.std ** 2 / n, n - 1))
         parts[-1] += (f" against the thesis's {ref}: mean {ours.mean - ref.mean:+.0f} steps, 95 % CI "
                       f"[{lo:+.0f}, {hi:+.0f}]")
+        easier.append(int(hi < 0) - int(lo > 0))
+    if easier and all(e == 1 for e in easier):
+        parts.append(f"our episodes are easier for {name} than the thesis's")
+    elif easier and all(e == -1 for e in easier):
+        parts.append(f"our episodes are harder for {name} than the thesis's")
     return "Our setting against the thesis's: " + "; ".join(parts) + "."
 
 

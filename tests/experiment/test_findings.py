@@ -115,6 +115,8 @@ def test_rates_both_at_100_or_0_are_saturated_not_confirmed():
     assert v.reasons == "saturated, both at 0 %" and v.checks[1].startswith("A.timeout 0.0 [0.0, 1.3] >= 0: ")
     v = verdict(finding("A.timeout < B.timeout", "A.success > 99"), by, "best")  # 99 is inside A's interval
     assert v.reasons == "a tie within noise; saturated, both at 0 %"
+    v = verdict(finding("A.success > B.success", "A.timeout < B.timeout"), by, "best")
+    assert v.reasons == "saturated, both at 100 % or 0 %"
     v = verdict(finding("A.timeout < B.timeout", "A.success < 90"), by, "best")  # one check fails outright
     assert v.label == "contradicted" and v.why.startswith("A.success < 90, difference +10.0 points")
 
@@ -151,4 +153,5 @@ def test_a_verdict_line_carries_its_statistic_and_the_setting_is_set_against_the
     assert line.startswith("Our setting against the thesis's: greedy succeeds in 92.0 % of 100 episodes (95 % CI "
                            "[85.0, 95.9]) against the thesis's 73 %: +19.0 points, 95 % CI [")
     assert "its TTE is 1000 ± 0 (1000) steps against the thesis's 1860 ± 1104 (1381): mean -860 steps" in line
+    assert line.endswith("; our episodes are easier for greedy than the thesis's.")
     assert line in text
