@@ -196,7 +196,10 @@ def markdown(spec: Spec, rows: list[dict], results: dict[str, dict] | None = Non
     if results is not None and spec.findings:
         by_condition = {c.name: done_results(spec, results, c) for c in spec.conditions}
         seeds = {c.name: (row["seeds"], row["planned"]) for c, row in zip(spec.conditions, rows, strict=True)}
-        text += findings_markdown(spec.findings, by_condition, seeds)
+        named = {c.condition for f in spec.findings for c in f.checks} | {
+            c.other for f in spec.findings for c in f.checks if c.other}
+        baselines = {c.name: c.thesis for c in spec.conditions if not c.trains and c.name in named and c.thesis}
+        text += findings_markdown(spec.findings, by_condition, seeds, baselines)
     return text
 
 
