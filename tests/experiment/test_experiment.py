@@ -647,7 +647,7 @@ def test_the_e7_buffer_shares_no_fire_layout_with_its_evaluation():
     assert fire_layouts(cfg, envs, e7.eval_seed, 2) <= evaluation  # the same seed gives the same layouts
 
 
-REPRODUCED = "E1_ppo"  # a cheap row (~15 s a seed) rerun at the code of commit 69c2998 (`--rerun E1_ppo`)
+REPRODUCED = "E1_ppo"  # a cheap row (~15 s a seed), made again in the reproducible mode at deaf51d (`--rerun E1_ppo`)
 
 
 @pytest.mark.slow
