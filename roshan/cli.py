@@ -593,9 +593,10 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
 @EXPERIMENT_STORAGE
 @click.option("--root", default="runs", show_default=True, type=click.Path(file_okay=False))
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
-              help="Report folder (default: ROOT/NAME/report); an earlier report of this experiment there is "
-                   "refreshed, other files of a report's names are refused unless --replace.")
-@click.option("--replace", is_flag=True, help="Overwrite a report's files in --out that another command wrote.")
+              help="Report folder (default: ROOT/NAME/report); one that holds a report's files (an earlier report, "
+                   "an evaluation's summary.json) is refused unless --replace.")
+@click.option("--replace", is_flag=True, help="Overwrite the report's files in --out (an earlier report, or files "
+              "another command wrote).")
 def experiment_report(spec_path, budget, storage, root, out_dir, replace):
     """Thesis-style tables of SPEC's finished runs (mean ± std (median) over seeds beside the thesis's values),
     per-seed rows (CSV, JSON) and a plot."""

@@ -307,9 +307,9 @@ REPORT_FILES = ("report.md", "per_seed.csv", "summary.json", "success.png", "run
 
 
 def refuse_foreign_outputs(spec: Spec, out: Path) -> None:
-    """Without --replace: a report folder may hold an earlier report of this experiment (a report is a view of the
-    journal: making it again refreshes it), but no other file of a report's names (an evaluation's summary.json,
-    another experiment's report): OutputError naming them and the two ways out."""
+    """Without --replace: a report folder that holds any file of a report's names (an earlier report, an
+    evaluation's summary.json, another experiment's report) is refused: OutputError naming them, what they belong
+    to, and the two ways out. Nothing is overwritten that the user did not name."""
     held = [name for name in REPORT_FILES if (out / name).exists()]
     if not held:
         return
@@ -317,10 +317,10 @@ def refuse_foreign_outputs(spec: Spec, out: Path) -> None:
         ours = (out / "report.md").read_text().startswith(f"Experiment `{spec.name}` (")
     except (OSError, UnicodeDecodeError):
         ours = False
-    if not ours:
-        raise OutputError("the experiment report", out, f"it holds {', '.join(held)} of something other than a report "
-                                                        f"of experiment {spec.name!r}; give --replace to overwrite "
-                                                        "them, or --out DIR to write a new folder")
+    what = f"an earlier report of experiment {spec.name!r}" if ours else \
+        f"something other than a report of experiment {spec.name!r}"
+    raise OutputError("the experiment report", out, f"it holds {', '.join(held)} of {what}; give --replace to "
+                                                    "overwrite them, or --out DIR to write a new folder")
 
 
 def report_experiment(spec_path: str | Path, budget: str, storage: str | None, root: str | Path,

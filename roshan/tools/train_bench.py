@@ -29,10 +29,15 @@ from roshan.tools import train_slice
 # family -> (condition of the thesis spec, what one env step is called)
 FAMILIES = {"E1": ("E1_ppo", "env-steps"), "E6": ("E6", "env-steps"), "TD3": ("E1_td3", "env-steps"),
             "planner": ("P3_h9600_i5", "decisions")}
+# Settings a slice adds to its condition's: TD3 starts its updates once the buffer holds 30,000 transitions, eight
+# iterations in; a slice would time collection alone. One iteration's worth (64 env steps x 64 drones) lets the
+# warm-up iteration fill it, so that the timed ones update as a run does from then on.
+SLICE_SETS = {"TD3": ("td3.min_memory_size=4096",)}
 MODES = ("reproducible", "vendor")
 
 
-def run_slice(checkout: Path, spec: str, condition: str, updates: int, mode: str, threads: int | None) -> dict:
+def run_slice(checkout: Path, spec: str, condition: str, updates: int, mode: str, threads: int | None,
+              sets: tuple[str, ...] = ()) -> dict:
     """One slice in a fresh process of ``checkout``'s code, with the torch settings of ``mode``."""
     env = {k: v for k, v in os.environ.items() if k not in reproducible.SETTINGS}
     env[reproducible.ENV_VAR] = "1" if mode == MODES[0] else "0"
@@ -40,7 +45,7 @@ def run_slice(checkout: Path, spec: str, condition: str, updates: int, mode: str
         env.update(reproducible.SETTINGS)
     env["PYTHONPATH"] = str(checkout)
     args = [sys.executable, train_slice.__file__, str(checkout / spec), condition, str(updates),
-            str(threads or 0)]
+            str(threads or 0), *sets]
     done = subprocess.run(args, cwd=checkout, env=env, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"bench train: {condition} ({mode}, {checkout}) failed:\n{done.stderr[-3000:]}")
@@ -60,7 +65,8 @@ def bench_training(families: list[str], modes: list[str], updates: int, rounds: 
             for mode in modes:
                 for name, checkout in checkouts:
                     row = {"family": family, "unit": unit, "mode": mode, "code": name, "round": r,
-                           **run_slice(checkout, spec, condition, updates, mode, threads)}
+                           **run_slice(checkout, spec, condition, updates, mode, threads,
+                                       SLICE_SETS.get(family, ()))}
                     rows.append(row)
                     if on_row is not None:
                         on_row(row)

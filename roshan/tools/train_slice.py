@@ -1,7 +1,7 @@
 """One slice of ``roshan bench train`` (:mod:`roshan.tools.train_bench`), run as a script in a process of its own:
-``python train_slice.py SPEC CONDITION UPDATES THREADS`` prints one JSON line. It imports only what the checkout it
-runs against has had for long (the experiment spec, the Trainer, the runtime), so that an older checkout's code can
-be timed with it (``PYTHONPATH`` names that checkout).
+``python train_slice.py SPEC CONDITION UPDATES THREADS [KEY=VALUE ...]`` prints one JSON line. It imports only what
+the checkout it runs against has had for long (the experiment spec, the Trainer, the runtime), so that an older
+checkout's code can be timed with it (``PYTHONPATH`` names that checkout).
 """
 
 from __future__ import annotations
@@ -41,12 +41,13 @@ class Stopwatch:
         self.seconds, self.on = 0.0, True
 
 
-def time_slice(spec_path: str, condition: str, updates: int, seed: int = 0) -> dict:
-    """Train ``condition`` of the spec for 1 + ``updates`` updates in a scratch folder and time the last
-    ``updates`` of them, then one periodic evaluation."""
+def time_slice(spec_path: str, condition: str, updates: int, seed: int = 0, sets: tuple[str, ...] = (),
+               evaluate: bool = True) -> dict:
+    """Train ``condition`` of the spec (plus ``sets``) for 1 + ``updates`` updates in a scratch folder and time the
+    last ``updates`` of them, then (``evaluate``) one periodic evaluation."""
     cond = load_spec(spec_path).condition(condition)
     budget = (f"train.max_updates={updates + 1}", "train.max_minutes=0", "train.total_steps=0", "train.eval_every=0")
-    cfg = cond.run_config(seed, budget)
+    cfg = cond.run_config(seed, (*sets, *budget))
     marks: list[tuple[float, int]] = []
     with tempfile.TemporaryDirectory() as folder:
         trainer = Trainer(cfg, Path(folder), progress_bar=False,
@@ -69,10 +70,12 @@ def time_slice(spec_path: str, condition: str, updates: int, seed: int = 0) -> d
         trainer.run()
         (t0, s0), (t1, s1) = marks[0], marks[-1]
         seconds = t1 - t0
-        trainer._periodic_eval()  # builds and compiles the evaluation env
-        t = time.perf_counter()
-        trainer._periodic_eval()
-        eval_seconds = time.perf_counter() - t
+        eval_seconds = 0.0
+        if evaluate:
+            trainer._periodic_eval()  # builds and compiles the evaluation env
+            t = time.perf_counter()
+            trainer._periodic_eval()
+            eval_seconds = time.perf_counter() - t
     collect_s = collect.seconds if collect is not None else 0.0
     every = cond.run_config(seed).train.eval_every
     per_update = seconds / updates
@@ -84,11 +87,11 @@ def time_slice(spec_path: str, condition: str, updates: int, seed: int = 0) -> d
 
 
 def _main(argv: list[str]) -> None:
-    spec, condition, updates, threads = argv[0], argv[1], int(argv[2]), int(argv[3])
+    spec, condition, updates, threads, sets = argv[0], argv[1], int(argv[2]), int(argv[3]), tuple(argv[4:])
     if threads:
         torch.set_num_threads(threads)
     init_taichi("cpu", threads or None)
-    row = time_slice(spec, condition, updates)
+    row = time_slice(spec, condition, updates, sets=sets)
     row["isa"] = str(torch.backends.cpu.get_cpu_capability())
     print(json.dumps(row))
 

@@ -361,7 +361,7 @@ def test_the_readme_report_command_gives_the_committed_report(tmp_path):
     for name in ("report.md", "per_seed.csv"):
         assert (tmp_path / "thesis" / name).read_text() == (committed / name).read_text(), (
             f"benchmarks/results/thesis/{name} is not what the committed journal gives: regenerate it with "
-            "`roshan experiment report configs/experiments/thesis.yaml --out benchmarks/results/thesis`")
+            "`roshan experiment report configs/experiments/thesis.yaml --out benchmarks/results/thesis --replace`")
 
 
 @pytest.mark.slow
@@ -788,7 +788,7 @@ def test_the_report_refuses_a_spec_changed_under_its_runs_as_run_does(tmp_path):
     assert not (tmp_path / "report").exists()
 
 
-def test_the_report_overwrites_only_its_own_earlier_report_unless_replace(tmp_path):
+def test_the_report_overwrites_nothing_unless_replace(tmp_path):
     # issue 52: `experiment report SPEC --out DIR` into an evaluation's folder replaced its summary.json
     spec_path = write_spec(tmp_path)
     spec, url, _ = start(spec_path, tmp_path)
@@ -802,7 +802,9 @@ def test_the_report_overwrites_only_its_own_earlier_report_unless_replace(tmp_pa
     assert (evaluation / "summary.json").read_text() == '{"episodes": 100}\n'
     report_experiment(spec_path, "local", url, tmp_path, evaluation, replace=True)
     assert (evaluation / "report.md").read_text().startswith("Experiment `demo` (")
-    report_experiment(spec_path, "local", url, tmp_path, evaluation)  # its own report: refreshed
+    with pytest.raises(OutputError, match=r"an earlier report of experiment 'demo'; give --replace"):
+        report_experiment(spec_path, "local", url, tmp_path, evaluation)  # its own report too: only with --replace
+    report_experiment(spec_path, "local", url, tmp_path, evaluation, replace=True)
 
 
 def test_a_committed_journal_is_written_only_when_named_as_storage(tmp_path):
