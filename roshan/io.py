@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import sys
 import tempfile
 from collections.abc import Iterator, Sequence
 from pathlib import Path
@@ -121,3 +122,39 @@ def write_gif(frames: Sequence[Path | str | np.ndarray], out: Path | str, fps: i
     # Pillow merges identical consecutive frames into one longer frame; the GIF's total duration is kept.
     images[0].save(out, save_all=True, append_images=images[1:], duration=max(1, round(1000 / fps)), loop=0)
     return out
+
+
+# ------------------------------------------------------------------------------------------------ progress
+
+
+class LineStream:
+    """A progress bar's output for a pipe or a log file: each refresh a line of its own. tqdm rewrites its one line
+    with carriage returns, which a terminal shows as a moving bar and a log as a single line that grows for the whole
+    run."""
+
+    def __init__(self, stream):
+        self.stream = stream
+
+    def write(self, text: str) -> None:
+        line = text.replace("\r", "").replace("\x1b[A", "").rstrip("\n")
+        if line.strip():
+            self.stream.write(line + "\n")
+
+    def flush(self) -> None:
+        self.stream.flush()
+
+
+LOG_INTERVAL_S = 30.0  # seconds between a bar's lines in a log: a line per refresh would flood it
+
+
+def progress_bar(**kwargs):
+    """A tqdm bar (keyword arguments as tqdm's) on standard error: a moving bar on a terminal; elsewhere a line
+    every :data:`LOG_INTERVAL_S` seconds (and at the end), of a fixed width, so that a log stays readable."""
+    from tqdm import tqdm
+
+    if not sys.stderr.isatty():
+        kwargs.update(file=LineStream(sys.stderr), dynamic_ncols=False, ncols=kwargs.get("ncols", 100),
+                      position=None)
+        kwargs.setdefault("mininterval", LOG_INTERVAL_S)
+        kwargs["mininterval"] = max(kwargs["mininterval"], LOG_INTERVAL_S)
+    return tqdm(**kwargs)

@@ -26,6 +26,7 @@ from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import straight_to_goal
 from roshan.episode import ENERGY_FIELDS, EPISODE_FIELDS, FIRE_FIELDS, REASONS, RECORD_FIELDS
 from roshan.io import OutputError, prepare_output, refuse_overwrite, write_gif, writing
+from roshan.io import progress_bar as new_bar
 from roshan.runs.collect import next_observation
 from roshan.runs.envs import caption_name, make_env
 from roshan.runs.provenance import code_version, settings_hash
@@ -70,7 +71,7 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
     # On a terminal the bar moves with the running episodes too (4.7/8); without one (a log file, CI) every line it
     # prints stays, so it counts finished episodes only, in whole numbers.
     fractional = progress_bar and sys.stderr.isatty()
-    bar = tqdm(total=quota * E, unit="episode", disable=not progress_bar, desc="eval",
+    bar = new_bar(total=quota * E, unit="episode", disable=not progress_bar, desc="eval",
                bar_format="{l_bar}{bar}| {n:" + (".1f" if fractional else ".0f") + "}/{total_fmt} episodes "
                           "[{elapsed}<{remaining}]")
     steps = torch.zeros(E, dtype=torch.long)  # steps of each env's running episode, for the bar
@@ -486,7 +487,7 @@ def save_buffer(target: str | Path, transitions: int, path: Path, seed: int = 0,
     shapes = {k: tuple(v.shape[2:]) for k, v in obs.items()}
     buf = ReplayBuffer(transitions, shapes, device=env.device)
     act = policy_fn(agent)
-    bar = tqdm(total=transitions, unit="transition", disable=not progress_bar, desc="buffer")
+    bar = new_bar(total=transitions, unit="transition", disable=not progress_bar, desc="buffer")
     while len(buf) < transitions:
         o = {k: v.clone() for k, v in flatten_drones(obs).items()}
         actions = act(o)

@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 import torch
 from torch.utils.tensorboard import SummaryWriter
-from tqdm import tqdm
 
 from roshan import reproducible
 from roshan.algos.agents import make_agent
@@ -34,7 +33,7 @@ from roshan.checkpoints import (
     save_checkpoint,
 )
 from roshan.config import Config, dump_config
-from roshan.io import OutputError, prepare_output, writing
+from roshan.io import OutputError, prepare_output, progress_bar, writing
 from roshan.runs.budget import budget_total
 from roshan.runs.envs import make_env
 from roshan.runs.episode_log import EpisodeLog
@@ -178,7 +177,7 @@ class Trainer:
     def _bar(self):
         counts_steps = self.learner.counts_env_steps
         total = budget_total(self.cfg.train, self.progress, 0, counts_steps)
-        return tqdm(total=total, initial=self.progress.env_steps if counts_steps else self.progress.updates,
+        return progress_bar(total=total, initial=self.progress.env_steps if counts_steps else self.progress.updates,
                     unit="step" if counts_steps else "update", dynamic_ncols=True,
                     disable=not self.progress_bar, desc=self.run_dir.name)
 

@@ -19,6 +19,7 @@ from optuna.trial import TrialState
 
 from roshan import reproducible
 from roshan.config import Config
+from roshan.io import progress_bar
 from roshan.runs.resume import start_run
 from roshan.runs.train import train
 from roshan.study.recipe import Recipe
@@ -47,11 +48,9 @@ class TrialDisplay:
     """The worker's progress line: trial, updates (or env steps) of the budget, training objective, reward."""
 
     def __init__(self, number: int, cfg: Config, slot: int, quiet: bool):
-        from tqdm import tqdm
-
         tc = cfg.train
         self.by_steps = tc.max_updates == 0 and tc.total_steps > 0
-        self.bar = tqdm(total=tc.max_updates or tc.total_steps or None, position=slot, leave=False,
+        self.bar = progress_bar(total=tc.max_updates or tc.total_steps or None, position=slot, leave=False,
                         desc=f"w{slot} trial {number}", unit="step" if self.by_steps else "update", disable=quiet,
                         dynamic_ncols=True, mininterval=1.0)
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from roshan.config import Config, to_dict
 from roshan.io import OutputError, prepare_output, refuse_overwrite, write_atomic, write_gif, writing
+from roshan.io import progress_bar as io_progress_bar
 from roshan.kernels.annotate import annotate
 from roshan.kernels.fire import FireSim
 from roshan.kernels.fire_records import N_STEP
@@ -253,6 +254,4 @@ def frame_name(step: int, time_s: float, episode: int | None = None) -> str:
 def progress_bar(total: int, enabled: bool):
     if not enabled or total <= 0:
         return None
-    from tqdm import tqdm
-
-    return tqdm(total=total, unit="step", desc="simulate", dynamic_ncols=True)
+    return io_progress_bar(total=total, unit="step", desc="simulate", dynamic_ncols=True)
