@@ -347,6 +347,8 @@ DRONE_PALETTE = ((255, 0, 255), (0, 191, 255), (0, 0, 160), (148, 0, 211), (0, 1
                  (65, 105, 225), (186, 85, 211))
 DRONE_RIM = (0, 0, 0)  # one-pixel dark rim so discs, crosses and explorers stand out on any land colour
 GROUNDSTATION_COLOUR = (255, 255, 255)
+# A disc drawn on another drone's shrinks by NESTED_STEP of the radius per drone under it, to NESTED_MIN at least
+NESTED_STEP, NESTED_MIN = 0.3, 0.25
 EXPLORER_COLOUR = (255, 255, 255)  # explorers: white diamonds with a dark rim (planner drones are discs)
 # With a battery and / or the water limit, bars under each drone's disc: its charge, then its tank (dark = empty)
 BATTERY_COLOUR = (120, 230, 60)
@@ -414,7 +416,9 @@ class DroneOverlay:
     a white outline. With ``explorers`` (a second DroneSim of the same envs, e.g. the planner's ExploreAgents)
     each explorer is a white diamond with a dark rim. Layers go groundstation, explorers, view squares, goals,
     discs, so drones are never hidden; within a layer drones are drawn in id order by a serial loop, so
-    overlapping marks always come out the same. With a battery (``drones.energy``) and / or the water limit, two
+    overlapping marks always come out the same, and a disc whose centre lies on an earlier drone's disc is drawn
+    smaller (by :data:`NESTED_STEP` of the radius per drone under it), so that drones on one spot show as rings.
+    With a battery (``drones.energy``) and / or the water limit, two
     bars under each disc, as wide as it, fill with the battery's charge and the tank's fill. Positions are read
     from the DroneSims' fields at each call (north up like the cells: metres along rows go down the image). Sizes
     come from :func:`mark_sizes`.
@@ -483,11 +487,18 @@ class DroneOverlay:
         ti.loop_config(serialize=True)
         for d in range(dr.num_drones):
             c = dr.pos[env, d] * px_per_m
-            outer = radius + 1.0
+            # A drone whose centre lies on the disc of a drone drawn before it is drawn smaller, so the one under
+            # it stays visible as a ring (drones without collisions can sit on one spot)
+            under = 0
+            for e in range(d):
+                if (dr.pos[env, e] * px_per_m - c).norm() < radius:
+                    under += 1
+            r = radius * ti.max(NESTED_MIN, 1.0 - NESTED_STEP * under)
+            outer = r + 1.0 if under == 0 else r  # a nested disc has no rim: it would cover the ring under it
             b = _pixels_around(image, c, outer)
             for py, px in ti.ndrange((b[0], b[1]), (b[2], b[3])):
                 d2 = (py + 0.5 - c[0]) ** 2 + (px + 0.5 - c[1]) ** 2
-                if d2 <= radius * radius:
+                if d2 <= r * r:
                     image[py, px] = self.palette[d]
                 elif d2 <= outer * outer:
                     image[py, px] = rim

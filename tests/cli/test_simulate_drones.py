@@ -163,3 +163,20 @@ def test_with_a_battery_and_a_tank_each_drone_carries_its_charge_and_fill_as_bar
     assert rows["tank"][0] > rows["battery"][0]  # the tank's bar below the battery's
     assert abs(rows["battery"][1] - 2 * rows["tank"][1]) <= 1  # half a bar against a quarter of one
     env.close()
+
+
+def test_drones_on_one_spot_are_all_visible_as_nested_rings():
+    """Drones without collisions can sit on one spot (in `roshan watch models/fly_simple` drone 0 vanished under
+    drone 2 while the legend listed it): a disc drawn on an earlier drone's is smaller, so every drone shows."""
+    env = FlyVectorEnv(num_envs=1, config=Config(drones=DroneConfig(num_drones=3)), fly=FlyConfig(policy="simple"),
+                       seed=5)
+    env.reset(seed=5)
+    env.drones.set_state(np.tile([[35.0, 202.5]], (1, 3, 1)), np.zeros((1, 3, 2)))  # all three on one point
+    env.drones.set_goals(np.tile([[10.5, 5.5]], (1, 3, 1)))
+    renderer = FrameRenderer(env.fire, env=0, cell_px=10, backend="raster", particles=False, wind_arrow=False)
+    img = renderer.render(overlay=drone_overlay(env.drones))
+    disc = img[20:51, 187:218]  # around the spot: the view squares' outlines lie outside it
+    counts = [int((disc == colour).all(-1).sum()) for colour in drone_colours(3)]
+    assert all(n >= 4 for n in counts), f"pixels of drones 0, 1, 2 at their shared spot: {counts}"
+    assert (img[35, 202] == drone_colours(3)[2]).all(), "the last drone is drawn on top, in the middle"
+    env.close()
