@@ -154,7 +154,5 @@ def progress_bar(**kwargs):
 
     if not sys.stderr.isatty():
         kwargs.update(file=LineStream(sys.stderr), dynamic_ncols=False, ncols=kwargs.get("ncols", 100),
-                      position=None)
-        kwargs.setdefault("mininterval", LOG_INTERVAL_S)
-        kwargs["mininterval"] = max(kwargs["mininterval"], LOG_INTERVAL_S)
+                      position=None, mininterval=max(kwargs.get("mininterval", 0.0), LOG_INTERVAL_S))
     return tqdm(**kwargs)

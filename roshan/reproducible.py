@@ -71,6 +71,16 @@ def enable(on: bool = True) -> None:
                                         "is imported")
 
 
+def environ(on: bool, base: dict | None = None) -> dict:
+    """The environment of a new process (``base``, default this one's) with the mode on or off, whatever ``base``
+    says: the way to start a process in a chosen mode, since the settings must be in place before its torch loads."""
+    env = {k: v for k, v in (os.environ if base is None else base).items() if k not in SETTINGS}
+    env[ENV_VAR] = "1" if on else "0"
+    if on:
+        env.update(SETTINGS)
+    return env
+
+
 def mkl_branch() -> int | None:
     """MKL's code branch in force (3 = COMPATIBLE), read from the MKL inside torch; None where it cannot be read
     (a torch without MKL, or MKL not loaded)."""

@@ -5,7 +5,6 @@ unchanged, on an Intel Xeon of the same machine kind: there is no table per vend
 import csv
 import hashlib
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -20,13 +19,8 @@ TESTS = Path(__file__).resolve().parent
 
 
 def fresh_env(mode: bool, **extra: str) -> dict:
-    """The environment of a new process, with the mode's variables set (``mode``) or left out, plus ``extra``."""
-    env = {k: v for k, v in os.environ.items() if k not in reproducible.SETTINGS and k != reproducible.ENV_VAR}
-    if mode:
-        env.update(reproducible.SETTINGS)
-    env[reproducible.ENV_VAR] = "1" if mode else "0"
-    env.update(extra)
-    return env
+    """The environment of a new process in the mode or out of it, plus ``extra``."""
+    return {**reproducible.environ(mode), **extra}
 
 
 def python(code: str, env: dict) -> str:

@@ -143,7 +143,7 @@ class PlannerConfig(Section):
     rewards: PlannerRewardConfig = field(default_factory=PlannerRewardConfig)
 
     def inert(self, battery: bool) -> list[str]:
-        """Settings that change nothing (or nothing useful) here, each as a warning line (issue 52); ``battery``:
+        """Settings that change nothing (or nothing useful) here, each as a warning line; ``battery``:
         the drones carry one (``drones.energy.enabled``)."""
         out = []
         if self.planner_resources and not battery:

@@ -164,9 +164,8 @@ class DroneConfig(Section):
     recharge_time: float = num(2.0, 0.0, doc="seconds an empty tank takes to refill at the groundstation")
     energy: EnergyConfig = field(default_factory=EnergyConfig)
 
-
     def inert(self) -> list[str]:
-        """Settings that change nothing here, each as a warning line (issue 52): set but silent, they read as if
+        """Settings that change nothing here, each as a warning line: set but silent, they read as if
         they had been applied."""
         if not self.energy.enabled and self.energy.approach > 0:
             return [f"drones.energy.approach = {self.energy.approach!r} does nothing while drones.energy.preset is "
@@ -176,7 +175,7 @@ class DroneConfig(Section):
     def battery_reach(self) -> float | None:
         """Metres from the groundstation a full battery can take a drone and bring it back, at the speed that goes
         farthest on a joule (at most v_max on both axes) with the tank full; None without a battery. No fire
-        farther than this can be put out (issue 52)."""
+        farther than this can be put out."""
         if not self.energy.enabled:
             return None
         e = self.energy.values()

@@ -17,7 +17,6 @@ has (the spec, the Trainer).
 from __future__ import annotations
 
 import json
-import os
 import statistics
 import subprocess
 import sys
@@ -39,11 +38,7 @@ MODES = ("reproducible", "vendor")
 def run_slice(checkout: Path, spec: str, condition: str, updates: int, mode: str, threads: int | None,
               sets: tuple[str, ...] = ()) -> dict:
     """One slice in a fresh process of ``checkout``'s code, with the torch settings of ``mode``."""
-    env = {k: v for k, v in os.environ.items() if k not in reproducible.SETTINGS}
-    env[reproducible.ENV_VAR] = "1" if mode == MODES[0] else "0"
-    if mode == MODES[0]:
-        env.update(reproducible.SETTINGS)
-    env["PYTHONPATH"] = str(checkout)
+    env = {**reproducible.environ(mode == MODES[0]), "PYTHONPATH": str(checkout)}
     args = [sys.executable, train_slice.__file__, str(checkout / spec), condition, str(updates),
             str(threads or 0), *sets]
     done = subprocess.run(args, cwd=checkout, env=env, capture_output=True, text=True)

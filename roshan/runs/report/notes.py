@@ -1,4 +1,4 @@
-"""Notes under a result that cannot mean what its table suggests (issue 52): a controller that put out no cell or
+"""Notes under a result that cannot mean what its table suggests: a controller that put out no cell or
 never left the base, fires out of the battery's range, a ratio of TTEs with no success behind it.
 
 A note is one line; the tables print them under themselves, and a map suite lists them under its rows.

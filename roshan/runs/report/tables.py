@@ -40,7 +40,7 @@ def _row_values(summary: dict) -> dict[str, str]:
             "Success rate": f"{_pct(summary['success_rate'])} [{100 * lo:.1f}, {100 * hi:.1f}]"}
     for reason, rate in summary["failure_rates"].items():
         rows[_rate_label(reason)] = _pct(rate)
-    if "drones_lost" in summary:  # with a battery: 50 of 64 drones down reads 0.0 % in the rate above (issue 52)
+    if "drones_lost" in summary:  # with a battery: 50 of 64 drones down reads 0.0 % in the rate above
         rows["Drones lost (per episode)"] = _mean_std_median(summary["drones_lost"], 2)
     rows["TTE (steps)"] = _mean_std_median(summary["tte"], 1)
     if "tte_seconds" in summary:
