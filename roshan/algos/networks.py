@@ -11,6 +11,8 @@ import math
 import torch
 from torch import nn
 
+from roshan.algos.linear import Linear
+
 RELU_GAIN = math.sqrt(2.0)
 
 
@@ -25,7 +27,7 @@ def mlp(sizes: list[int], final_activation: bool = True) -> nn.Sequential:
     """Linear-ReLU stack; the last Linear is followed by ReLU only if ``final_activation``."""
     layers: list[nn.Module] = []
     for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:], strict=True)):
-        layers.append(layer_init(nn.Linear(a, b)))
+        layers.append(layer_init(Linear(a, b)))
         if final_activation or i < len(sizes) - 2:
             layers.append(nn.ReLU())
     return nn.Sequential(*layers)
@@ -57,7 +59,7 @@ class CollisionEncoder(nn.Module):
         super().__init__()
         self.own = mlp([9, hidden, hidden])
         self.neighbour = mlp([4, hidden, hidden, embed], final_activation=False)
-        self.score = nn.Sequential(layer_init(nn.Linear(embed, embed)), nn.Tanh(), layer_init(nn.Linear(embed, 1)))
+        self.score = nn.Sequential(layer_init(Linear(embed, embed)), nn.Tanh(), layer_init(Linear(embed, 1)))
         self.norm = nn.LayerNorm(embed)
         self.fusion = mlp([hidden + embed + 1, hidden, embed])
         self.out_features = embed * frames
@@ -108,8 +110,8 @@ class ActorCritic(nn.Module):
         self.encoder = make_encoder(collision, frames)
         self.critic_encoder = None if share_encoder else make_encoder(collision, frames)
         width = self.encoder.out_features
-        self.mu = layer_init(nn.Linear(width, 2), gain=0.1)
-        self.value = layer_init(nn.Linear(width, 1), gain=1.0)
+        self.mu = layer_init(Linear(width, 2), gain=0.1)
+        self.value = layer_init(Linear(width, 1), gain=1.0)
         self.log_std = nn.Parameter(torch.zeros(2))
         self.tanh_mean = tanh_mean
 
@@ -179,7 +181,7 @@ def frozen_copy(net: nn.Module) -> nn.Module:
 
 def _head(sizes: list[int], gain: float) -> nn.Sequential:
     """ReLU hidden layers (gain sqrt 2) and a linear output layer with its own ``gain`` (docs/model/learning.md §1)."""
-    return nn.Sequential(*mlp(sizes[:-1]), layer_init(nn.Linear(sizes[-2], sizes[-1]), gain=gain))
+    return nn.Sequential(*mlp(sizes[:-1]), layer_init(Linear(sizes[-2], sizes[-1]), gain=gain))
 
 
 class DeterministicActor(nn.Module):
@@ -204,7 +206,7 @@ class MeanActor(nn.Module):
     def __init__(self, collision: bool, frames: int = 3):
         super().__init__()
         self.encoder = make_encoder(collision, frames)
-        self.mu = layer_init(nn.Linear(self.encoder.out_features, 2), gain=0.1)
+        self.mu = layer_init(Linear(self.encoder.out_features, 2), gain=0.1)
 
     def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         return self.mu(self.encoder(obs))

@@ -15,6 +15,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from roshan.algos.linear import Linear
 from roshan.algos.networks import layer_init
 
 HIDDEN = 64
@@ -147,15 +148,15 @@ class ThesisPlannerNet(nn.Module):
                  temperature: float = 1.0, resources: bool = False, distance_prior: float = 0.0,
                  distinct_goals: bool = False):
         super().__init__()
-        self.pos_emb = nn.Linear(2, hidden)
-        self.goal_emb = nn.Linear(2, hidden)
-        self.fire_emb = nn.Linear(2, hidden)
+        self.pos_emb = Linear(2, hidden)
+        self.goal_emb = Linear(2, hidden)
+        self.fire_emb = Linear(2, hidden)
         self.id_emb = nn.Embedding(num_drones, hidden)
         self.attn = nn.MultiheadAttention(hidden, heads, batch_first=True)
-        self.value_head = nn.Linear(hidden, 1)
+        self.value_head = Linear(hidden, 1)
         self.resources = resources
         if resources:  # without a battery the network (and its initial draws) is the thesis net's
-            self.water_emb, self.energy_emb = nn.Linear(1, hidden), nn.Linear(2, hidden)
+            self.water_emb, self.energy_emb = Linear(1, hidden), Linear(2, hidden)
         init_weights(self)
         layer_init(self.value_head, gain=1.0)
         self.register_buffer("drone_ids", torch.arange(num_drones), persistent=False)
@@ -264,7 +265,7 @@ class ThesisPlannerNet(nn.Module):
 
 
 def embed(in_features: int, hidden: int = HIDDEN) -> nn.Sequential:
-    return nn.Sequential(nn.Linear(in_features, hidden), nn.ReLU())
+    return nn.Sequential(Linear(in_features, hidden), nn.ReLU())
 
 
 class PlannerEncoder(nn.Module):
@@ -278,7 +279,7 @@ class PlannerEncoder(nn.Module):
         self.water_emb, self.fire_emb = embed(1), embed(2)
         self.count_emb, self.centroid_emb, self.wind_emb = embed(1), embed(2), embed(2)
         self.id_emb = nn.Embedding(num_drones, hidden)
-        self.fusion = nn.Sequential(nn.Linear(5 * hidden, 2 * hidden), nn.ReLU(), nn.Linear(2 * hidden, hidden),
+        self.fusion = nn.Sequential(Linear(5 * hidden, 2 * hidden), nn.ReLU(), Linear(2 * hidden, hidden),
                                     nn.ReLU())
         self.self_attn = nn.MultiheadAttention(hidden, heads, batch_first=True)
         self.self_norm = nn.LayerNorm(hidden)
@@ -316,14 +317,14 @@ class PointerPlannerNet(nn.Module):
                  temperature: float = 1.0, resources: bool = False, distance_prior: float = 0.0):
         super().__init__()
         self.encoder = PlannerEncoder(num_drones, hidden, heads, resources)
-        self.query_proj = nn.Linear(hidden, hidden)
-        self.key_proj = nn.Linear(hidden, hidden)
+        self.query_proj = Linear(hidden, hidden)
+        self.key_proj = Linear(hidden, hidden)
         self.log_temperature = nn.Parameter(torch.zeros(1))
         self.temperature = temperature  # planner.temperature, on top of the learned one
         self.log_penalty = nn.Parameter(torch.tensor([1.6]))  # c = e^1.6 ~ 4.95
         self.pool_query = nn.Parameter(torch.randn(1, 1, hidden))
         self.pool_attn = nn.MultiheadAttention(hidden, heads, batch_first=True)
-        self.value_head = nn.Sequential(nn.Linear(hidden, 2 * hidden), nn.ReLU(), nn.Linear(2 * hidden, 1))
+        self.value_head = nn.Sequential(Linear(hidden, 2 * hidden), nn.ReLU(), Linear(2 * hidden, 1))
         init_weights(self)
         layer_init(self.value_head[-1], gain=1.0)
         self.prior = make_distance_prior(distance_prior)
