@@ -27,7 +27,7 @@ from roshan.experiment.runner import (
     run_key,
     spec_storage,
 )
-from roshan.experiment.spec import Condition, Reference, Spec, load_spec
+from roshan.experiment.spec import Condition, Reference, Run, Spec, load_spec
 from roshan.io import OutputError, write_atomic, writing
 from roshan.study.storage import open_storage
 
@@ -208,7 +208,7 @@ def per_seed_csv(spec: Spec, results: dict[str, dict]) -> str:
     w = csv.writer(buf)
     w.writerow(["condition", "seed", "episodes", *[f"{m}_pct" for m in RATES], "tte_mean", "tte_median",
                 "last_success_pct", "objective_success_pct", "updates", "env_steps", "train_minutes", "minutes",
-                "machine", "commit"])
+                "machine", "commit", "low_level"])
     for run in spec.runs():
         r = results.get(run.key)
         if r is None:
@@ -221,8 +221,20 @@ def per_seed_csv(spec: Spec, results: dict[str, dict]) -> str:
                     f"{100 * r['objective']['success_rate']:.2f}" if "objective" in r else "",
                     train.get("updates", ""), train.get("env_steps", ""),
                     f"{train['seconds'] / 60:.2f}" if "seconds" in train else "", f"{r.get('minutes', 0):.2f}",
-                    "; ".join(made_on(r)), commits([r])[0]])
+                    "; ".join(made_on(r)), commits([r])[0], low_level(run, r)])
     return buf.getvalue()
+
+
+def low_level(run: Run, result: dict) -> str:
+    """The digest of the low-level FlyAgent a run flew (``planner.fly_model``) or recorded its buffer with: '' for
+    a run that loads no model, '?' for one finished before results recorded it."""
+    if not run.models():
+        return ""
+    models = result.get("models")
+    if models is None:
+        return "?"
+    key = "planner.fly_model" if "planner.fly_model" in models else "buffer.model"
+    return models[key]["digest"] if key in models else ""
 
 
 def _plain(row: dict) -> dict:

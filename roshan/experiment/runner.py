@@ -349,6 +349,7 @@ def execute_run(run: Run, folder: Path, extra: tuple[str, ...] = (), progress_ba
         "train": {k: trained[k] for k in ("updates", "env_steps", "seconds") if k in trained},
         "minutes": round((time.time() - start) / 60.0, 3), "run_dir": str(folder), "code": provenance["code"],
         "machine": reproducible.machine(), "trained_on": trained.get("machines", []),
+        "models": {key: {"setting": target, "digest": digest} for key, (target, digest) in run.models().items()},
     }
     result.update(others)
     with writing("the run's result", folder / "result.json"):

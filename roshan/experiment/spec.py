@@ -35,6 +35,7 @@ Runs are queued in the spec's order (conditions, then seeds), so list what matte
 from __future__ import annotations
 
 import fnmatch
+import functools
 import hashlib
 import json
 import re
@@ -45,6 +46,8 @@ from typing import Any
 
 import yaml
 
+from roshan.algos.frozen import fly_model_path
+from roshan.checkpoints import resolve_checkpoint
 from roshan.config import Config, apply_overrides, load_config
 from roshan.config.schema import to_dict
 from roshan.experiment.findings import Finding, parse_findings
@@ -145,7 +148,27 @@ class Run:
                     values[section][key] = then
         body = [_non_defaults(values, defaults_of_record()), c.controller,
                 c.eval_episodes, c.eval_seed, c.eval_envs, c.buffer and vars(c.buffer)]
+        changed = {k: digest for k, (target, digest) in self.models().items()
+                   if MODELS_OF_RECORD.get(target) != digest}
+        if changed:  # only then: a run whose models are those of record keeps the fingerprint it was stored with
+            body.append(changed)
         return hashlib.sha256(json.dumps(body, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+    def models(self) -> dict[str, tuple[str, str]]:
+        """The trained models the run depends on without training them: config key (or ``buffer.model``) ->
+        (the setting, :func:`model_digest` of the checkpoint it loads). A FlyAgent that trains has none; a planner
+        and a scripted controller fly ``planner.fly_model`` and ``planner.explorer_model``; an offline condition
+        records its buffer with ``buffer.model``."""
+        c = self.condition
+        cfg = c.run_config(self.seed)
+        keys = () if cfg.train.level.flies and c.trains else ("planner.fly_model", "planner.explorer_model")
+        targets = {key: getattr(cfg.planner, key.split(".", 1)[1]) for key in keys}
+        if c.buffer is not None:
+            targets["buffer.model"] = c.buffer.model
+        try:
+            return {key: (target, model_digest(target, key)) for key, target in targets.items()}
+        except FileNotFoundError as e:
+            raise SpecError(f"condition {c.name}: {e}") from None
 
 
 @dataclass(frozen=True)
@@ -203,6 +226,28 @@ class Spec:
 # it cannot tell apart: a condition that relies on the default and ran both before and after the change; give
 # such a condition the key explicitly (configs/thesis/planner.yaml sets planner.greedy_home).
 DEFAULTS_OF_RECORD = {"planner": {"greedy_home": "original"}}
+
+# The models the stored runs loaded, by the digest of the checkpoint file each setting resolved to when runs began to
+# be fingerprinted by their models' contents: a run that loads one of these (the same setting, the same bytes)
+# keeps the fingerprint it was stored with; another file, or any change to one of these, enters the fingerprint.
+MODELS_OF_RECORD = {"models/fly_collision": "bb16fb1903bc60f3", "models/fly_simple": "354955b36c3390f9"}
+
+
+def model_digest(target: str, key: str = "planner.fly_model") -> str:
+    """The first 16 hex digits of the SHA-256 of the checkpoint file that ``target`` (a run folder or checkpoint,
+    as ``key`` names it) loads for acting."""
+    path = resolve_checkpoint(fly_model_path(target, key))
+    stat = path.stat()
+    return _file_digest(str(path.resolve()), stat.st_size, stat.st_mtime_ns)
+
+
+@functools.cache
+def _file_digest(path: str, size: int, mtime_ns: int) -> str:  # size and mtime: a rewritten file is read again
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()[:16]
 
 
 def defaults_of_record() -> dict:

@@ -185,6 +185,39 @@ def test_the_thesis_spec_still_means_what_its_journal_ran(tmp_path):
     check_runs(spec, study.user_attrs[STUDY_ATTR], study)  # what `roshan experiment run` does: raises if changed
 
 
+def test_the_low_level_model_enters_a_runs_fingerprint_by_its_contents(tmp_path, monkeypatch):
+    """A planner row means the FlyAgent its drones fly: a changed model file is another run, while the models the
+    stored runs flew (the same setting, the same bytes: MODELS_OF_RECORD) keep their stored fingerprints."""
+    import shutil
+
+    import roshan.experiment.spec as spec_module
+    from roshan.experiment.report import low_level
+
+    fly = tmp_path / "fly"
+    shutil.copytree(REPO / "models" / "fly_collision", fly)
+    setting = "    set: {{planner.fly_model: " + str(fly) + "}}\n"  # doubled braces: write_spec formats SPEC
+    text = SPEC.replace("    controller: greedy\n", "    controller: greedy\n" + setting)
+    (greedy,) = [r for r in load_spec(write_spec(tmp_path, text)).runs() if r.condition.name == "greedy"]
+    setting, digest = greedy.models()["planner.fly_model"]
+    assert (setting, digest) == (str(fly), spec_module.MODELS_OF_RECORD["models/fly_collision"])  # same bytes
+    before = greedy.fingerprint()
+    with open(fly / "checkpoints" / "best_eval.pt", "ab") as fh:
+        fh.write(b"\0")  # another file under the same name
+    assert greedy.models()["planner.fly_model"][1] != digest and greedy.fingerprint() != before
+
+    plain = load_spec(REPO / "configs" / "experiments" / "thesis.yaml")
+    row = plain.runs(("greedy",))[0]
+    stored = row.fingerprint()
+    monkeypatch.setitem(spec_module.MODELS_OF_RECORD, "models/fly_collision", "0" * 16)  # as if the file changed
+    assert row.fingerprint() != stored
+    assert plain.runs(("E1_ppo",))[0].models() == {}  # a FlyAgent that trains loads no model
+    assert set(plain.runs(("E7",))[0].models()) == {"buffer.model"}
+    # per_seed.csv's low_level column: the digest the result recorded, '?' where it recorded none
+    assert low_level(row, {"models": {"planner.fly_model": {"setting": "models/fly_collision",
+                                                            "digest": "ab" * 8}}}) == "ab" * 8
+    assert low_level(row, {}) == "?" and low_level(plain.runs(("E1_ppo",))[0], {}) == ""
+
+
 # ------------------------------------------------------------------------------------------ running (fakes)
 
 
@@ -609,6 +642,7 @@ conditions:
     assert (report / "runs" / "simple" / "seed_0.json").is_file()
     rows = list(csv.DictReader((report / "per_seed.csv").open()))
     assert rows[0]["last_success_pct"] == rows[0]["success_pct"]
+    assert result["models"] == {} and rows[0]["low_level"] == ""  # a FlyAgent that trains flies no frozen model
     again = subprocess.run([*cmd, "run", str(spec), "--root", str(tmp_path / "runs")], env=env,
                            capture_output=True, text=True, timeout=300, cwd=REPO)
     assert again.returncode == 0 and "1/1 runs done, 0 waiting" in again.stdout  # nothing is run twice
