@@ -557,13 +557,17 @@ BUDGET = click.option("--budget", type=click.Choice(["local", "thesis"]), defaul
               help="Run these conditions' finished runs, or these runs, once more with the code here now (names or "
                    "patterns, such as 'E5' or 'E5*/seed_[012]'; the newest result is reported, earlier ones stay in "
                    "the journal).")
+@click.option("--remake", multiple=True, metavar="CONDITION[/seed_S]",
+              help="Make these runs again under the settings the spec now gives them, which differ from those their "
+                   "results were made with (names or patterns as for --rerun): their earlier results leave the "
+                   "report and stay in the journal. Without it such a spec is refused.")
 @click.option("--worker", is_flag=True, hidden=True)
 @click.option("--slot", type=click.IntRange(min=0), default=0, hidden=True)
 @ARCH
 @THREADS
 @REPRODUCIBLE
-def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbeat, only, rerun, worker, slot, arch,
-                   threads):
+def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbeat, only, rerun, remake, worker, slot,
+                   arch, threads):
     """Train and evaluate every (condition, seed) of SPEC; run it again to continue after a crash (finished runs
     are kept, a killed one continues from its checkpoint); machines sharing --storage split the runs."""
     from roshan.experiment.runner import run_experiment, run_storage, run_worker, spec_storage
@@ -579,12 +583,37 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
             sys.exit(run_worker(spec, url, root, heartbeat=heartbeat, max_retry=max_retry, extra=extra, only=chosen))
         args = (["--arch", arch] if arch else []) + (["--threads", str(threads)] if threads else [])
         run_experiment(spec, root, storage, workers, args, heartbeat, max_retry, echo=click.echo, only=chosen,
-                       rerun=spec.select_runs(rerun) if rerun else ())
+                       rerun=spec.select_runs(rerun) if rerun else (),
+                       remake=spec.select_runs(remake, "--remake") if remake else ())
         # the report reads the spec's journal by default: name the copy the runs went to when it is another
         used = run_storage(spec, root, storage)
         named = used if storage or used != spec_storage(spec, root) else None
     click.echo(f"report: roshan experiment report {spec_path}" + (f" --budget {budget}" if budget != "local" else "")
                + (f" --storage {named}" if named else "") + (f" --root {root}" if root != "runs" else ""))
+
+
+@experiment.command("carry")
+@click.argument("source_path", type=click.Path(dir_okay=False))
+@click.argument("spec_path", type=click.Path(dir_okay=False))
+@click.option("--source-storage", default=None, help="SOURCE's journal or URL (default: its spec's storage).")
+@EXPERIMENT_STORAGE
+@click.option("--root", default="runs", show_default=True, type=click.Path(file_okay=False))
+@click.option("--only", multiple=True, metavar="CONDITION", help="Carry only these conditions (names or patterns).")
+def experiment_carry(source_path, spec_path, source_storage, storage, root, only):
+    """Record SOURCE's finished runs as SPEC's, for the conditions both specs hold with the same settings: rows
+    that move to an experiment of their own keep their results (SOURCE's journal is only read; SPEC's committed
+    journal is written only when --storage names it, as with `experiment run`)."""
+    from roshan.experiment.runner import carry_results, load_experiment, run_storage, spec_storage
+    from roshan.experiment.spec import load_spec
+    from roshan.study.storage import open_storage
+
+    with reported():
+        source, spec = load_spec(source_path), load_spec(spec_path)
+        chosen = spec.select(only)
+        origin = load_experiment(open_storage(spec_storage(source, root, source_storage), heartbeat=None),
+                                 source.name)
+        target = open_storage(run_storage(spec, root, storage, click.echo), heartbeat=None)
+        carry_results(origin, spec, target, chosen, echo=click.echo)
 
 
 @experiment.command("report")

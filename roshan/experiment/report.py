@@ -24,6 +24,7 @@ from roshan.experiment.runner import (
     experiment_dir,
     load_experiment,
     progress,
+    retired_before,
     run_key,
     spec_storage,
 )
@@ -48,9 +49,10 @@ def rate(result: dict, metric: str) -> float:
 
 
 def results_of(study) -> dict[str, dict]:
-    """run key -> result of every finished run."""
+    """run key -> result of every finished run (its newest, leaving out results retired by ``--remake``)."""
+    retired = retired_before(study)
     return {run_key(t): t.user_attrs[RESULT_ATTR] for t in study.get_trials(deepcopy=False)
-            if t.state.is_finished() and RESULT_ATTR in t.user_attrs}
+            if t.state.is_finished() and RESULT_ATTR in t.user_attrs and t.number >= retired.get(run_key(t), 0)}
 
 
 def done_results(spec: Spec, results: dict[str, dict], cond: Condition) -> list[dict]:

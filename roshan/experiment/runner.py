@@ -111,10 +111,12 @@ def run_key(t: optuna.trial.FrozenTrial) -> str | None:
 # ------------------------------------------------------------------------------------------ the study
 
 
-def prepare_experiment(storage, spec: Spec, echo: Callable[[str], None] = print) -> optuna.Study:
+def prepare_experiment(storage, spec: Spec, echo: Callable[[str], None] = print,
+                       remake: tuple[str, ...] = ()) -> optuna.Study:
     """Create the experiment's study with one waiting trial per run, or continue it. Runs the study lacks (new
     conditions or seeds, a creator killed while enqueueing, a run that failed) are queued; a stored run whose
-    settings differ from the spec's is refused."""
+    settings differ from the spec's is refused, unless ``remake`` (run keys) names it: then its results so far are
+    retired (they stay in the journal, out of the report) and it is queued to be made under the new settings."""
     prints = spec.fingerprints()
     try:
         study = optuna.create_study(study_name=spec.name, storage=storage, direction="maximize")
@@ -122,14 +124,53 @@ def prepare_experiment(storage, spec: Spec, echo: Callable[[str], None] = print)
     except optuna.exceptions.DuplicatedStudyError:
         study = optuna.load_study(study_name=spec.name, storage=storage)
         stored = _wait_for_meta(study)
+        if remake:
+            stored = retire_runs(study, stored, remake, echo)
         check_runs(spec, stored, study)
-        study.set_user_attr(STUDY_ATTR, {"spec": spec.path, "runs": {**stored["runs"], **prints}})
+        study.set_user_attr(STUDY_ATTR, {**stored, "spec": spec.path, "runs": {**stored["runs"], **prints}})
     drop_orphans(study, spec, echo)
-    queued = {run_key(t) for t in study.get_trials(deepcopy=False) if t.state != TrialState.FAIL}
+    retired = retired_before(study)
+    queued = {run_key(t) for t in study.get_trials(deepcopy=False)
+              if t.state != TrialState.FAIL and t.number >= retired.get(run_key(t), 0)}
+    newest = newest_trials(study)
     for key in prints:
         if key not in queued:
-            study.enqueue_trial({}, user_attrs={RUN_ATTR: key})
+            attrs = {RUN_ATTR: key}
+            if key in newest:  # a remade run: a folder of its own (its old one holds the other settings' run)
+                attrs[RERUN_ATTR] = newest[key].number
+            study.enqueue_trial({}, user_attrs=attrs)
     return study
+
+
+def retire_runs(study: optuna.Study, stored: dict, keys: tuple[str, ...], echo: Callable[[str], None]) -> dict:
+    """The study's meta with the runs ``keys`` retired: every trial of theirs made so far leaves the report and
+    the settings check (the trial numbers below ``retired[key]``). A retired run that is running is refused."""
+    trials = study.get_trials(deepcopy=False)
+    busy = sorted({run_key(t) for t in trials if run_key(t) in keys and t.state == TrialState.RUNNING})
+    if busy:
+        raise SpecError(f"experiment {study.study_name!r}: {', '.join(busy)} running now; remake them once they end")
+    for t in trials:  # their waiting trials (a rerun or retry queued under the old settings) must not run
+        if run_key(t) in keys and t.state == TrialState.WAITING:
+            study._storage.set_trial_user_attr(t._trial_id, "dropped", "remade under new settings")
+            study._storage.set_trial_state_values(t._trial_id, state=TrialState.FAIL)
+    cut = max((t.number for t in trials), default=-1) + 1
+    echo(f"experiment {study.study_name}: {len(keys)} run(s) to be made again under new settings; their earlier "
+         "results stay in the journal, out of the report")
+    return {**stored, "retired": {**stored.get("retired", {}), **{k: cut for k in keys}}}
+
+
+def retired_before(study: optuna.Study) -> dict[str, int]:
+    """run key -> the trial number below which its trials are retired (``--remake``); {} where none is."""
+    return (study.user_attrs.get(STUDY_ATTR) or {}).get("retired", {})
+
+
+def newest_trials(study: optuna.Study) -> dict[str, optuna.trial.FrozenTrial]:
+    """run key -> its newest trial (any state)."""
+    newest = {}
+    for t in study.get_trials(deepcopy=False):  # trials come in number order
+        if run_key(t) is not None:
+            newest[run_key(t)] = t
+    return newest
 
 
 def drop_orphans(study: optuna.Study, spec: Spec, echo: Callable[[str], None] = print) -> int:
@@ -153,10 +194,7 @@ def queue_reruns(study: optuna.Study, spec: Spec, patterns: tuple[str, ...],
     :meth:`Spec.select_runs`) once more, to be made by the code that runs them now (in a folder of their own); the
     newest result of a run is the one reported, the earlier ones stay in the journal. A run whose rerun is already
     queued or running is left alone. Returns how many were queued."""
-    newest: dict[str, optuna.trial.FrozenTrial] = {}
-    for t in study.get_trials(deepcopy=False):
-        if run_key(t) is not None:
-            newest[run_key(t)] = t  # trials come in number order
+    newest = newest_trials(study)
     queued = 0
     for key in spec.select_runs(patterns):
         t = newest.get(key)
@@ -171,14 +209,18 @@ def check_runs(spec: Spec, stored: dict, study: optuna.Study) -> None:
     """Refuse a spec under which a run that has started would mean something else (config, controller,
     evaluation); runs still waiting may change."""
     trials = study.get_trials(deepcopy=False)
+    retired = stored.get("retired", {})
     # a run whose every trial failed has no result to mean something else: it may take new settings (its folder,
-    # made under the old ones, is set aside when it starts again: claim_folder)
-    started = {run_key(t) for t in trials if t.state not in (TrialState.WAITING, TrialState.FAIL)}
+    # made under the old ones, is set aside when it starts again: claim_folder); nor has a run whose results were
+    # retired (--remake)
+    started = {run_key(t) for t in trials if t.state not in (TrialState.WAITING, TrialState.FAIL)
+               and t.number >= retired.get(run_key(t), 0)}
     changed = [k for k, fp in spec.fingerprints().items() if stored["runs"].get(k, fp) != fp and k in started]
     if changed:
         raise SpecError(f"{spec.path}: experiment {spec.name!r} holds runs made with other settings under the same "
                         f"keys ({', '.join(changed[:6])}{' ...' if len(changed) > 6 else ''}): keep their conditions "
-                        "as they were (add new conditions instead), or give the spec another name")
+                        "as they were (add new conditions instead), give the spec another name, or make them again "
+                        "under the new settings with --remake")
 
 
 def _wait_for_meta(study: optuna.Study, wait: float = 10.0) -> dict:
@@ -215,6 +257,33 @@ def progress(study: optuna.Study, keys=None) -> dict[str, int]:
         if t.state in names:
             out[names[t.state]] += 1
     return out
+
+
+def carry_results(source: optuna.Study, spec: Spec, storage, only: tuple[str, ...] = (),
+                  echo: Callable[[str], None] = print) -> int:
+    """Record the finished runs of ``source`` (another experiment's study) as ``spec``'s, for the conditions both
+    hold (``only``: these of them): rows moving to an experiment of their own keep their results. Each run must mean
+    the same in both, its fingerprint under ``spec`` the one ``source`` stored, else nothing is recorded. Runs that
+    ``spec``'s study already finished are left alone. Returns how many were recorded."""
+    stored = _wait_for_meta(source)["runs"]
+    results = {run_key(t): t.user_attrs[RESULT_ATTR] for t in source.get_trials(deepcopy=False)
+               if t.state == TrialState.COMPLETE and RESULT_ATTR in t.user_attrs
+               and t.number >= retired_before(source).get(run_key(t), 0)}
+    prints = {k: fp for k, fp in spec.fingerprints().items() if k in results and (not only or k.split("/")[0] in only)}
+    differ = [k for k, fp in prints.items() if stored.get(k) != fp]
+    if differ:
+        raise SpecError(f"{spec.path}: {', '.join(differ[:6])}{' ...' if len(differ) > 6 else ''} would mean "
+                        f"something else than in experiment {source.study_name!r}: their settings differ")
+    study = prepare_experiment(storage, spec, echo)
+    done = {run_key(t) for t in study.get_trials(deepcopy=False) if t.state == TrialState.COMPLETE}
+    order = {k: i for i, k in enumerate(k for k in prints if k not in done)}
+    carried = 0
+    while (got := claim(study, order)) is not None:
+        trial, key = got
+        record_result(study, trial, {**results[key], "carried_from": source.study_name})
+        carried += 1
+    echo(f"experiment {spec.name}: {carried} finished run(s) carried over from experiment {source.study_name}")
+    return carried
 
 
 # ------------------------------------------------------------------------------------------ one worker
@@ -511,16 +580,17 @@ def check_sources(spec: Spec, only: tuple[str, ...] = ()) -> None:
 def run_experiment(spec: Spec, root: str | Path = "runs", storage: str | None = None, workers: int = 1,
                    worker_args: list[str] | tuple = (), heartbeat: int | None = 60, max_retry: int | None = 3,
                    echo: Callable[[str], None] = print, poll: float = 1.0, only: tuple[str, ...] = (),
-                   rerun: tuple[str, ...] = ()) -> optuna.Study:
+                   rerun: tuple[str, ...] = (), remake: tuple[str, ...] = ()) -> optuna.Study:
     """``roshan experiment run``: create or continue the experiment and run its waiting runs with ``workers``
     processes on this machine (only the runs of the conditions ``only`` names, when given: the whole spec is
     still created, so other runs keep their place for a later call), after queueing the finished runs that
-    ``rerun`` names (conditions or runs ``CONDITION/seed_S``) again; returns the study."""
+    ``rerun`` names (conditions or runs ``CONDITION/seed_S``) again, and after retiring the results of the runs
+    ``remake`` names, to be made under the settings the spec now gives them; returns the study."""
     check_trainable(spec, only)
     check_sources(spec, only)
     url = run_storage(spec, root, storage, echo)
     store = open_storage(url, heartbeat, max_retry, repair=True, echo=echo)
-    study = prepare_experiment(store, spec, echo)
+    study = prepare_experiment(store, spec, echo, remake)
     if rerun:
         queue_reruns(study, spec, rerun, echo)
     keys = {r.key for r in spec.runs(only)}

@@ -31,10 +31,12 @@ from roshan.experiment.report import (
 from roshan.experiment.runner import (
     RERUN_ATTR,
     STUDY_ATTR,
+    carry_results,
     check_runs,
     check_sources,
     check_trainable,
     claim_folder,
+    load_experiment,
     prepare_experiment,
     progress,
     queue_reruns,
@@ -287,6 +289,63 @@ def test_a_rerun_makes_finished_runs_again_in_their_own_folders_and_its_result_i
     newest = [t for t in study.get_trials() if t.user_attrs.get(RERUN_ATTR) == 1]
     assert results_of(study)["fast/seed_1"] == newest[0].user_attrs["result"] == first  # the fake is deterministic
     assert progress(study, {"fast/seed_0", "fast/seed_1"})["done"] == 2
+
+
+def test_remake_retires_a_changed_runs_results_and_makes_it_again_under_the_new_settings(tmp_path):
+    """A condition changed on purpose (the thesis's planner rows given the thesis's own flier): --remake takes the
+    new settings, its old results leave the report but stay in the journal, and its runs are made again in folders
+    of their own; without it the changed spec is refused as before."""
+    spec_path = write_spec(tmp_path)
+    spec, url, study = start(spec_path, tmp_path)
+    log, folders = tmp_path / "log", []
+
+    def execute(run, folder):
+        folders.append(folder.relative_to(tmp_path).as_posix())
+        return recording_execute(log)(run, folder)
+
+    while run_worker(spec, url, tmp_path, execute=execute, only=("fast",)) == 0 \
+            and progress(study, {"fast/seed_0", "fast/seed_1"})["waiting"]:
+        pass
+    assert {"fast/seed_0", "fast/seed_1"} <= set(results_of(study))
+    spec_path.write_text(spec_path.read_text().replace("train.max_updates: 3", "train.max_updates: 4"))
+    changed = load_spec(spec_path)
+    storage = open_storage(url, heartbeat=60)
+    with pytest.raises(SpecError, match="--remake"):
+        prepare_experiment(storage, changed)
+    trials_before = len(study.get_trials())
+    study = prepare_experiment(storage, changed, echo=lambda _: None, remake=changed.select_runs(("fast",)))
+    assert not {"fast/seed_0", "fast/seed_1"} & set(results_of(study))  # retired: out of the report
+    assert progress(study, {"fast/seed_0", "fast/seed_1"})["waiting"] == 2
+    check_runs(changed, study.user_attrs[STUDY_ATTR], study)  # the journal now means the new settings
+    prepare_experiment(storage, changed, echo=lambda _: None)  # and a later call needs no --remake
+    assert progress(study, {"fast/seed_0", "fast/seed_1"})["waiting"] == 2  # queued once
+    for _ in range(2):
+        assert run_worker(changed, url, tmp_path, execute=execute, only=("fast",)) == 0
+    assert lines(log, "done") == ["fast/seed_0", "fast/seed_1"] * 2
+    assert folders[2:] == ["demo/fast/seed_0.rerun-0", "demo/fast/seed_1.rerun-1"]
+    assert {"fast/seed_0", "fast/seed_1"} <= set(results_of(study))
+    assert len(study.get_trials()) == trials_before + 2  # the old trials stay in the journal
+
+
+def test_rows_moving_to_an_experiment_of_their_own_carry_their_results(tmp_path):
+    spec, url, study = start(write_spec(tmp_path), tmp_path)
+    while run_worker(spec, url, tmp_path, execute=recording_execute(tmp_path / "log")) == 0 \
+            and progress(study)["waiting"]:
+        pass
+    moved_dir = tmp_path / "moved"
+    moved_dir.mkdir()
+    text = SPEC.replace("name: demo", "name: moved")
+    moved = load_spec(write_spec(moved_dir, text))
+    target = open_storage(str(tmp_path / "moved.journal"), heartbeat=None)
+    assert carry_results(study, moved, target, ("fast", "greedy"), echo=lambda _: None) == 3
+    kept = load_experiment(target, "moved")
+    assert results_of(kept)["fast/seed_1"]["success_rate"] == results_of(study)["fast/seed_1"]["success_rate"]
+    assert results_of(kept)["fast/seed_1"]["carried_from"] == "demo"
+    assert progress(kept) == {"done": 3, "running": 0, "waiting": 3, "failed": 0}  # more_seeds: still to run
+    assert carry_results(study, moved, target, echo=lambda _: None) == 3  # again: only what is not there yet
+    changed = load_spec(write_spec(moved_dir, text.replace("train.max_updates: 3", "train.max_updates: 4")))
+    with pytest.raises(SpecError, match=r"fast/seed_0, fast/seed_1 would mean something else"):
+        carry_results(study, changed, open_storage(str(tmp_path / "other.journal"), heartbeat=None))
 
 
 def test_a_rerun_can_name_single_runs_of_a_condition(tmp_path):
