@@ -175,15 +175,17 @@ def test_a_missing_config_file_is_named(tmp_path):
 
 
 @pytest.mark.slow
-def test_the_thesis_spec_still_means_what_its_journal_ran(tmp_path):
-    """The committed spec against the runs its journal recorded: a row rewritten (e.g. with a ``base``) must keep
-    every started run's settings, or ``roshan experiment run`` would refuse the journal."""
+@pytest.mark.parametrize("name,runs", [("thesis", 100), ("planner_stable_flier", 40)])
+def test_a_committed_spec_still_means_what_its_journal_ran(tmp_path, name, runs):
+    """The committed spec against the runs its journal recorded: a row rewritten (e.g. with a ``base``, or moved
+    to a spec of its own) must keep every started run's settings, or ``roshan experiment run`` would refuse the
+    journal."""
     journal = tmp_path / "experiment.journal"
-    journal.write_bytes((REPO / "benchmarks" / "results" / "thesis" / "experiment.journal").read_bytes())
-    spec = load_spec(REPO / "configs" / "experiments" / "thesis.yaml")
+    journal.write_bytes((REPO / "benchmarks" / "results" / name / "experiment.journal").read_bytes())
+    spec = load_spec(REPO / "configs" / "experiments" / f"{name}.yaml")
     study = optuna.load_study(study_name=spec.name, storage=open_storage(str(journal), heartbeat=None))
     started = {run_key(t) for t in study.get_trials(deepcopy=False) if t.state != optuna.trial.TrialState.WAITING}
-    assert len(started & set(spec.fingerprints())) > 100  # the check below has runs to hold the spec against
+    assert len(started & set(spec.fingerprints())) > runs  # the check below has runs to hold the spec against
     check_runs(spec, study.user_attrs[STUDY_ATTR], study)  # what `roshan experiment run` does: raises if changed
 
 
@@ -439,21 +441,23 @@ def test_waiting_runs_of_a_removed_condition_are_dropped_and_a_spec_that_has_the
 
 
 @pytest.mark.slow
-def test_the_readme_report_command_gives_the_committed_report(tmp_path):
+@pytest.mark.parametrize("spec_name", ["thesis", "planner_stable_flier"])
+def test_the_readme_report_command_gives_the_committed_report(tmp_path, spec_name):
     """On a fresh clone `roshan experiment report configs/experiments/thesis.yaml --out out/thesis` (the README's
     command) reads the committed journal and writes the committed report, table for table. The journal is read
     from a copy here (the report never writes to it, but a running experiment may append to the checkout's)."""
     journal = tmp_path / "experiment.journal"
-    journal.write_bytes((REPO / "benchmarks" / "results" / "thesis" / "experiment.journal").read_bytes())
-    out = subprocess.run([sys.executable, "-m", "roshan", "experiment", "report", "configs/experiments/thesis.yaml",
-                          "--storage", str(journal), "--out", str(tmp_path / "thesis")],
-                         capture_output=True, text=True, timeout=300, cwd=REPO)
+    journal.write_bytes((REPO / "benchmarks" / "results" / spec_name / "experiment.journal").read_bytes())
+    out = subprocess.run([sys.executable, "-m", "roshan", "experiment", "report",
+                          f"configs/experiments/{spec_name}.yaml", "--storage", str(journal), "--out",
+                          str(tmp_path / spec_name)], capture_output=True, text=True, timeout=300, cwd=REPO)
     assert out.returncode == 0, out.stderr[-3000:]
-    committed = REPO / "benchmarks" / "results" / "thesis"
+    committed = REPO / "benchmarks" / "results" / spec_name
     for name in ("report.md", "per_seed.csv"):
-        assert (tmp_path / "thesis" / name).read_text() == (committed / name).read_text(), (
-            f"benchmarks/results/thesis/{name} is not what the committed journal gives: regenerate it with "
-            "`roshan experiment report configs/experiments/thesis.yaml --out benchmarks/results/thesis --replace`")
+        assert (tmp_path / spec_name / name).read_text() == (committed / name).read_text(), (
+            f"benchmarks/results/{spec_name}/{name} is not what the committed journal gives: regenerate it with "
+            f"`roshan experiment report configs/experiments/{spec_name}.yaml --out benchmarks/results/{spec_name} "
+            "--replace`")
 
 
 @pytest.mark.slow
