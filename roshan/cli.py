@@ -544,8 +544,10 @@ BUDGET = click.option("--budget", type=click.Choice(["local", "thesis"]), defaul
 @EXPERIMENT_STORAGE
 @click.option("--root", default="runs", show_default=True, type=click.Path(file_okay=False),
               help="Runs train in ROOT/NAME/<condition>/seed_<s>/.")
-@click.option("--workers", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Worker processes on this machine (one run each at a time).")
+@click.option("--workers", type=click.IntRange(min=1), default=None,
+              help="Worker processes on this machine (one run each at a time). Default: one per core, each run "
+                   "on one thread (--threads N: cores / N workers); runs give the same results however they "
+                   "share the machine.")
 @click.option("--max-retry", type=click.IntRange(min=0), default=3, show_default=True,
               help="Retries of a run whose worker died (each continues from its latest checkpoint).")
 @click.option("--heartbeat", type=click.IntRange(min=1), default=60, show_default=True,
@@ -572,11 +574,14 @@ def experiment_run(spec_path, budget, storage, root, workers, max_retry, heartbe
     are kept, a killed one continues from its checkpoint); machines sharing --storage split the runs."""
     from roshan.experiment.runner import run_experiment, run_storage, run_worker, spec_storage
     from roshan.experiment.spec import load_spec
+    from roshan.runtime import share_cores
     from roshan.study.trial import local_values
 
     with reported():
         spec = load_spec(spec_path, budget)
         chosen = spec.select(only)
+        if not worker:
+            workers, threads = share_cores(workers, threads)
         extra = tuple(f"{k}={v}" for k, v in local_values(arch, threads).items())
         if worker:
             url = run_storage(spec, root, storage)

@@ -118,6 +118,19 @@ def cpu_cores() -> int:
         return os.cpu_count() or 1
 
 
+def share_cores(workers: int | None, threads: int | None) -> tuple[int, int | None]:
+    """(worker processes, CPU threads of each) for runs that share this machine: what is given, the rest split from
+    the cores; given neither, one single-threaded run per core. A training run's update is one thread in the
+    reproducible mode, so a second run on a core gains more than a second thread in one run would (BENCHMARKS,
+    "Training at the machine's speed"). ``None`` threads: all cores (one worker)."""
+    cores = cpu_cores()
+    if workers is None:
+        return (cores, 1) if threads is None else (max(1, cores // threads), threads)
+    if threads is None and workers > 1:
+        threads = max(1, cores // workers)
+    return workers, threads
+
+
 def threads_warning(threads: int | None) -> str | None:
     """A warning line when ``threads`` asks for more CPU threads than this machine has cores (they would only
     take turns: ``--threads 999`` on 2 cores ran 2.5x slower than ``--threads 2``), else None."""

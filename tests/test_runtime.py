@@ -165,3 +165,16 @@ def test_taichi_imported_before_roshan_is_patched_as_roshan_loads():
             "print(kernel_impl._inside_class.__module__)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
     assert out.stdout.split()[-1] == "roshan.taichi_patches", out.stdout + out.stderr
+
+
+@pytest.mark.parametrize("cores,given,shared", [
+    (2, (None, None), (2, 1)),   # neither given: one single-threaded run per core
+    (2, (None, 2), (1, 2)),      # threads given: the workers that fit
+    (16, (None, 4), (4, 4)),
+    (2, (1, None), (1, None)),   # one worker: all cores
+    (16, (4, None), (4, 4)),     # workers given: the cores split between them
+    (2, (3, 1), (3, 1)),         # both given: as given
+])
+def test_runs_share_the_cores(monkeypatch, cores, given, shared):
+    monkeypatch.setattr(runtime, "cpu_cores", lambda: cores)
+    assert runtime.share_cores(*given) == shared

@@ -14,6 +14,7 @@ from pathlib import Path
 import optuna
 from optuna.trial import FrozenTrial, TrialState
 
+from roshan.runtime import share_cores
 from roshan.study.errors import StudyError
 from roshan.study.recipe import Recipe
 from roshan.study.storage import HOST_ID
@@ -24,7 +25,7 @@ def worker_args(workers: int, arch: str | None, threads: int | None, quiet: bool
                 max_retry: int | None) -> list[str]:
     """The options a worker process gets: this machine's arch and threads (W workers share the cores unless
     ``threads`` is given), display and heartbeat settings."""
-    threads = threads or (max(1, (os.cpu_count() or 1) // workers) if workers > 1 else None)
+    _, threads = share_cores(workers, threads)
     args = ["--arch", arch] if arch else []
     args += ["--threads", str(threads)] if threads else []
     args += ["--heartbeat", str(heartbeat)] if heartbeat else []
