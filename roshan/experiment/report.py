@@ -159,6 +159,14 @@ def compute_line(spec: Spec, rows: list[dict]) -> str:
                                   unknown else "."))
 
 
+def departures_markdown(spec: Spec) -> list[str]:
+    """The header's list of what the spec keeps unlike the thesis, each with its reason and measured effect."""
+    if not spec.departures:
+        return []
+    return ["Departures from the thesis kept here:", "",
+            *(f"- **{d.what}** Why: {d.why} Effect: {d.effect}" for d in spec.departures), ""]
+
+
 def _code(row: dict) -> str:
     c = row.get("commits") or []
     return c[0] if len(c) == 1 else f"mixed: {', '.join(c)}"
@@ -176,6 +184,7 @@ def markdown(spec: Spec, rows: list[dict], results: dict[str, dict] | None = Non
            "finished before results recorded their commit). *machine*: the CPUs that trained and evaluated the seeds, "
            "with the kernels' instruction set where torch ran outside the reproducible mode ('?': a run finished "
            "before results recorded its machine).", "",
+           *departures_markdown(spec),
            "| condition | seeds | code | machine | metric | ours: best | last | objective | thesis |",
            "|---|---|---|---|---|---|---|---|---|"]
     for cond, row in zip(spec.conditions, rows, strict=True):

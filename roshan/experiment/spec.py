@@ -21,6 +21,8 @@ A spec is a YAML file::
       E1_ppo_long:
         base: E1_ppo                             # E1_ppo's keys (not its note); `set`, `thesis_set` and `eval`
         set: {train.total_steps: 540672}         # merged key by key, this condition's values winning
+    departures:                                  # settings kept unlike the thesis, in the report's header
+      - {what: ..., why: ..., effect: ...}
     findings:                                    # the thesis's claims, judged in the report (findings.py)
       - claim: a longer run succeeds more often
         source: Table 5.1
@@ -76,6 +78,15 @@ class Reference:
         if self.std is not None:
             s += f" ± {self.std:g}"
         return s + (f" ({self.median:g})" if self.median is not None else "")
+
+
+@dataclass(frozen=True)
+class Departure:
+    """A setting the spec keeps unlike the thesis: what it is, why it is kept and what it does to the figures."""
+
+    what: str
+    why: str
+    effect: str
 
 
 @dataclass(frozen=True)
@@ -179,6 +190,7 @@ class Spec:
     conditions: tuple[Condition, ...]
     storage: str | None = None  # where its runs are recorded unless --storage says otherwise
     findings: tuple[Finding, ...] = ()  # the thesis's claims, judged in the report
+    departures: tuple[Departure, ...] = ()  # what the spec keeps unlike the thesis, listed in the report's header
 
     def runs(self, only: tuple[str, ...] = ()) -> list[Run]:
         """Every (condition, seed), in the spec's order: conditions first, then seeds."""
@@ -416,10 +428,10 @@ def load_spec(path: str | Path, budget: str = "local") -> Spec:
         raise SpecError(f"{path}: not valid YAML ({exc})") from None
     if not isinstance(raw, dict) or not isinstance(raw.get("conditions"), dict) or not raw["conditions"]:
         raise SpecError(f"{path}: expected a mapping with a non-empty 'conditions' mapping")
-    unknown = set(raw) - {"name", "seeds", "eval", "conditions", "note", "storage", "findings"}
+    unknown = set(raw) - {"name", "seeds", "eval", "conditions", "note", "storage", "findings", "departures"}
     if unknown:
         raise SpecError(f"{path}: unknown key(s) {', '.join(sorted(unknown))}; expected name, seeds, eval, storage, "
-                        "conditions, findings")
+                        "conditions, findings, departures")
     storage = raw.get("storage")
     if storage is not None and (not isinstance(storage, str) or not storage.strip()):
         raise SpecError(f"{path}: storage: expected a journal file (relative to the working directory) or a URL, "
@@ -437,4 +449,23 @@ def load_spec(path: str | Path, budget: str = "local") -> Spec:
         findings = parse_findings(raw.get("findings"), {c.name for c in conditions}, str(path))
     except ValueError as exc:
         raise SpecError(str(exc)) from None
-    return Spec(name, str(path), budget, tuple(conditions), storage, findings)
+    departures = parse_departures(raw.get("departures"), str(path))
+    return Spec(name, str(path), budget, tuple(conditions), storage, findings, departures)
+
+
+DEPARTURE_KEYS = ("what", "why", "effect")
+
+
+def parse_departures(raw: Any, where: str) -> tuple[Departure, ...]:
+    """The spec's ``departures``: a list of {what, why, effect}, each a non-empty text."""
+    if raw is None:
+        return ()
+    if not isinstance(raw, list):
+        raise SpecError(f"{where}: departures: expected a list of {{what, why, effect}}, got {raw!r}")
+    out = []
+    for i, item in enumerate(raw):
+        if not isinstance(item, dict) or set(item) != set(DEPARTURE_KEYS) or not all(
+                isinstance(item[k], str) and item[k].strip() for k in DEPARTURE_KEYS):
+            raise SpecError(f"{where}: departures[{i}]: expected what, why and effect, each a text, got {item!r}")
+        out.append(Departure(*(" ".join(item[k].split()) for k in DEPARTURE_KEYS)))
+    return tuple(out)

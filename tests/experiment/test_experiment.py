@@ -159,6 +159,8 @@ def test_a_condition_with_a_base_is_the_base_written_out_with_its_own_keys_over_
     (("(100.0)", "(100.0"), "conditions.fast.thesis.success: expected 'mean ± std (median)'"),
     (("sim.envs: 4", "sim.envz: 4"), "conditions.fast: "),
     (("seeds: [5, 7, 11]", "seeds: [5, 5]"), "a seed is listed twice"),
+    (("conditions:", "departures: [{{what: a flier of our own, why: the thesis's is lost}}]\nconditions:"),
+     "departures[0]: expected what, why and effect"),
 ]] + [(BASED, *c) for c in BASE_ERRORS])
 def test_bad_specs_name_the_condition_and_key(tmp_path, text, change, message):
     path = write_spec(tmp_path, text.replace(*change))
@@ -549,6 +551,16 @@ def test_a_retry_that_carries_its_runs_result_is_completed_not_run_again(tmp_pat
 
 
 # ------------------------------------------------------------------------------------------ the report
+
+
+def test_the_reports_header_lists_each_departure_with_its_reason_and_effect(tmp_path):
+    text = SPEC.replace("conditions:", "departures:\n  - what: drones fly our flier.\n    why: the thesis's is lost.\n"
+                        "    effect: >-\n      2 points more\n      success.\nconditions:")
+    spec = load_spec(write_spec(tmp_path, text))
+    header = markdown(spec, condition_rows(spec, {})).split("| condition |")[0]
+    assert "- **drones fly our flier.** Why: the thesis's is lost. Effect: 2 points more success." in header
+    assert "Departures" not in markdown(load_spec(write_spec(tmp_path)), condition_rows(load_spec(
+        write_spec(tmp_path)), {}))
 
 
 def test_report_is_mean_std_median_over_seeds_beside_the_thesis(tmp_path):
