@@ -8,25 +8,30 @@ to open). The window is destroyed when its last user releases it.
 import os
 import tempfile
 
-import taichi as ti
-from taichi.lang import impl
+from roshan import runtime, taichi_patches
+
+ti = taichi_patches.import_taichi()  # patched before Taichi defines its own kernels, whoever imports this first
 
 WINDOW_TITLE = "ROSHAN-Taichi"
-# The runtime is kept (not its id) so a re-initialised Taichi can never look like the one the window belongs to.
-_shared: dict[str, object] = {"window": None, "res": None, "runtime": None, "users": 0}
+
+
+def _state() -> dict:
+    """The window, its size, the Taichi runtime it belongs to and its users. The runtime is kept (not its id) so a
+    re-initialised Taichi can never look like the one the window belongs to."""
+    return runtime.for_this_process("ggui window", lambda: {"window": None, "res": None, "runtime": None, "users": 0})
 
 
 def _open_window(res: tuple[int, int]):
     """A new offscreen GGUI window of ``res = (width, height)``; raises if GGUI/Vulkan is unavailable."""
     window = ti.ui.Window(WINDOW_TITLE, res, show_window=False)
-    _shared.update(window=window, res=tuple(res), runtime=impl.get_runtime())
+    _state().update(window=window, res=tuple(res), runtime=ti.lang.impl.get_runtime())
     return window
 
 
 def _close_window() -> None:
-    if _shared["window"] is not None:
-        _destroy_elsewhere(_shared["window"])
-    _shared.update(window=None, res=None, runtime=None)
+    if _state()["window"] is not None:
+        _destroy_elsewhere(_state()["window"])
+    _state().update(window=None, res=None, runtime=None)
 
 
 def _destroy_elsewhere(window) -> None:
@@ -48,23 +53,23 @@ def acquire_window(res: tuple[int, int], held):
 
     Replaces the window when the size differs or when Taichi was re-initialised since it was opened.
     """
-    if _shared["res"] != tuple(res) or _shared["runtime"] is not impl.get_runtime():
+    if _state()["res"] != tuple(res) or _state()["runtime"] is not ti.lang.impl.get_runtime():
         _close_window()
         _open_window(res)
     if held is None:
-        _shared["users"] += 1
-    return _shared["window"]
+        _state()["users"] += 1
+    return _state()["window"]
 
 
 def release_window() -> None:
-    _shared["users"] = max(0, _shared["users"] - 1)
-    if _shared["users"] == 0:
+    _state()["users"] = max(0, _state()["users"] - 1)
+    if _state()["users"] == 0:
         _close_window()
 
 
 def ggui_available() -> bool:
     """Whether an offscreen GGUI window can be opened in this process (opens the shared window if none is open)."""
-    if _shared["window"] is not None:
+    if _state()["window"] is not None:
         return True
     try:
         _open_window((16, 16))
@@ -78,8 +83,8 @@ def open_shown_window(res: tuple[int, int], title: str = WINDOW_TITLE):
 
     The shared offscreen window is closed first when nobody uses it (two live windows crash Taichi 1.7).
     """
-    if _shared["window"] is not None:
-        if _shared["users"] > 0:
+    if _state()["window"] is not None:
+        if _state()["users"] > 0:
             raise RuntimeError("an offscreen GGUI window is in use; close its renderers before opening a shown one")
         _close_window()
     return ti.ui.Window(title, tuple(res), show_window=True, vsync=False)

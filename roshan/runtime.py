@@ -6,11 +6,12 @@ import os
 import warnings
 from collections.abc import Callable
 
-import taichi as ti
-from taichi.lang import kernel_impl
-from taichi.lang.ast.ast_transformer_utils import ASTTransformerContext
+from roshan import allocator, taichi_patches
 
-from roshan import taichi_patches
+taichi_patches.import_taichi()  # first: Taichi defines its own kernels as it loads (see there)
+
+import taichi as ti  # noqa: E402
+from taichi.lang.ast.ast_transformer_utils import ASTTransformerContext  # noqa: E402
 
 ARCHES = ("cpu", "cuda", "vulkan", "auto")
 # Taichi's default fast math lets LLVM use approximate reciprocals and square roots (RCP14/RSQRT14 and the like)
@@ -26,6 +27,7 @@ FAST_MATH = False
 OFFLINE_CACHE_BYTES = 1 << 30
 _current: dict[str, object] = {}
 _per_runtime: dict[str, object] = {}  # objects that live as long as the Taichi runtime (for_this_runtime)
+_per_process: dict[str, object] = {}  # objects that outlive a re-initialised runtime (for_this_process)
 # Bumped whenever the runtime is reset or re-initialised: an object that holds fields compares the number it was
 # built under (an int comparison, cheap enough for every step) to refuse use after its fields died.
 _generation = [0]
@@ -71,6 +73,7 @@ def init_taichi(arch: str = "cpu", threads: int | None = None, debug: bool = Fal
         kwargs["offline_cache_max_size_of_files"] = OFFLINE_CACHE_BYTES
     if _current:  # ti.init re-initialises: every field and kernel of the old runtime dies
         _forget_runtime()
+    allocator.retain_freed_memory()  # the process that starts Taichi steps envs and their torch tensors
     _plain_source_positions(not debug)
     if arch == "cpu":
         kwargs["arch"] = ti.cpu
@@ -93,7 +96,7 @@ def init_taichi(arch: str = "cpu", threads: int | None = None, debug: bool = Fal
 # it formats a caret diagram of the source (textwrap over the line) for every AST node, only to attach it as
 # debug info: ~40 % of the transform. Outside debug mode each node gets "File, line, function" and its source
 # line instead, which is what a compile error then shows (tests/test_runtime.py checks it). The source lookups
-# it repeats are patched by roshan.taichi_patches (normally already, by roshan/__init__.py, as Taichi loaded).
+# it repeats are patched by roshan.taichi_patches, as this module imported Taichi.
 _FULL_POSITIONS = ASTTransformerContext.get_pos_info
 
 
@@ -105,8 +108,6 @@ def _plain_position(ctx, node) -> str:
 def _plain_source_positions(plain: bool) -> None:
     ASTTransformerContext.get_pos_info = _plain_position if plain else _FULL_POSITIONS
 
-
-taichi_patches.patch_kernel_impl(kernel_impl)
 
 
 def cpu_cores() -> int:
@@ -206,6 +207,23 @@ def for_this_runtime(name: str, make: Callable[[], object]):
     if name not in _per_runtime:
         _per_runtime[name] = make()
     return _per_runtime[name]
+
+
+def for_this_process(name: str, make: Callable[[], object]):
+    """The object ``name`` of this process, made by ``make()`` at its first use and kept across re-initialised
+    runtimes: the one GGUI window (:mod:`roshan.ggui`, which must see the old runtime's window to destroy it),
+    the warnings given once."""
+    if name not in _per_process:
+        _per_process[name] = make()
+    return _per_process[name]
+
+
+def warn_once(what: str) -> bool:
+    """True the first time this process asks to warn about ``what``."""
+    warned = for_this_process("warned", set)
+    first = what not in warned
+    warned.add(what)
+    return first
 
 
 def _forget_runtime() -> None:

@@ -1,9 +1,10 @@
 """Patches to Taichi 1.7.4 (its last release) that cut the Python work of defining and building kernels.
 
-This module imports nothing of Taichi: ``roshan/__init__.py`` applies :func:`patch_kernel_impl` the moment
-``taichi.lang.kernel_impl`` has run, before ``import taichi`` goes on to define Taichi's own ~90 kernels and
-functions (``taichi._funcs``, ``taichi._kernels``). Applied later, by :mod:`roshan.runtime`, it would leave
-those to the slow path: ~60 ms of every start on this machine kind.
+This module imports nothing of Taichi until asked: :func:`import_taichi`, which :mod:`roshan.runtime` calls before
+anything of Taichi is imported, applies :func:`patch_kernel_impl` the moment ``taichi.lang.kernel_impl`` has run,
+before ``import taichi`` goes on to define Taichi's own ~90 kernels and functions (``taichi._funcs``,
+``taichi._kernels``). Applied after ``import taichi``, it would leave those to the slow path: ~60 ms of every start
+on this machine kind. The one-shot import hook that does this is gone again when ``import_taichi`` returns.
 
 What is patched and why:
 - to tell whether a ``@ti.kernel`` or ``@ti.func`` is defined in a class body, Taichi reads the class frame's
@@ -13,14 +14,65 @@ What is patched and why:
   ``sys.modules`` too) at every call site it inlines: ~900 lookups for a fire simulator. The source of a
   function object is looked up once.
 
-tests/test_runtime.py holds both, and that a fresh ``import roshan, taichi`` makes no ``getframeinfo`` call.
+tests/test_runtime.py holds both, and that a fresh ``import roshan.runtime`` makes no ``getframeinfo`` call.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import linecache
 import sys
 from collections.abc import Callable
+
+KERNEL_IMPL = "taichi.lang.kernel_impl"
+
+
+def import_taichi():
+    """``import taichi`` with the patches in place before Taichi defines its own kernels; the taichi module.
+
+    Where Taichi is loaded already (a user imported it first), it is patched now. No import hook outlives the call.
+    """
+    if KERNEL_IMPL in sys.modules:
+        patch_kernel_impl(sys.modules[KERNEL_IMPL])
+    else:
+        hook = _AfterImport(KERNEL_IMPL, patch_kernel_impl)
+        try:
+            import taichi  # noqa: F401
+        finally:
+            hook.remove()  # still there only if the import failed before reaching kernel_impl
+    return sys.modules["taichi"]
+
+
+class _AfterImport:
+    """A one-shot import hook (a meta path finder and the loader it hands out; importlib.abc's base classes are
+    left out because importing them costs 30 ms): finds module ``name`` with the other finders, runs it, then
+    calls ``then(module)``."""
+
+    def __init__(self, name: str, then: Callable):
+        self.name, self.then = name, then
+        sys.meta_path.insert(0, self)
+
+    def remove(self) -> None:
+        if self in sys.meta_path:
+            sys.meta_path.remove(self)
+
+    def find_spec(self, name, path, target=None):
+        if name != self.name:
+            return None
+        self.remove()
+        spec = importlib.util.find_spec(name)  # the finders after this one
+        if spec is None or spec.loader is None:
+            return spec
+        self.loader, spec.loader = spec.loader, self
+        return spec
+
+    def create_module(self, spec):
+        return self.loader.create_module(spec)
+
+    def exec_module(self, module):
+        module.__loader__ = module.__spec__.loader = self.loader  # the module keeps its own loader afterwards
+        self.loader.exec_module(module)
+        self.then(module)
 
 
 def patch_kernel_impl(kernel_impl) -> None:

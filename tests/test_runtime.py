@@ -144,24 +144,28 @@ def test_kernel_sources_are_looked_up_once_and_class_kernels_still_recognised():
 
 
 def test_taichi_is_patched_before_it_defines_its_own_kernels():
-    """roshan's import hook patches kernel_impl as it loads, so even the ~90 kernels and functions that
-    ``import taichi`` defines itself never call inspect.getframeinfo (each call scans sys.modules)."""
+    """roshan.runtime imports Taichi through a one-shot hook that patches kernel_impl as it loads, so even the ~90
+    kernels and functions that ``import taichi`` defines itself never call inspect.getframeinfo (each call scans
+    sys.modules); no hook is left behind."""
     code = (
         "import inspect\n"
         "calls = []\n"
         "real = inspect.getframeinfo\n"
         "inspect.getframeinfo = lambda *a, **k: calls.append(1) or real(*a, **k)\n"
-        "import roshan, taichi\n"
+        "import sys\n"
+        "hooks = list(sys.meta_path)\n"
+        "import roshan.runtime\n"
         "from taichi.lang import kernel_impl\n"
         "assert kernel_impl._inside_class.__module__ == 'roshan.taichi_patches'\n"
+        "assert sys.meta_path == hooks, sys.meta_path\n"
         "print(len(calls))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
     assert out.stdout.split()[-1] == "0", out.stdout + out.stderr
 
 
-def test_taichi_imported_before_roshan_is_patched_as_roshan_loads():
-    code = ("import taichi\nfrom taichi.lang import kernel_impl\nimport roshan\n"
+def test_taichi_imported_before_roshan_is_patched_as_its_runtime_loads():
+    code = ("import taichi\nfrom taichi.lang import kernel_impl\nimport roshan.runtime\n"
             "print(kernel_impl._inside_class.__module__)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
     assert out.stdout.split()[-1] == "roshan.taichi_patches", out.stdout + out.stderr

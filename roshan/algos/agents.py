@@ -26,9 +26,15 @@ def planner_ppo(cfg: PPOConfig, network: str, num_drones: int, device: str | tor
                device, rnd)
 
 
-def make_agent(cfg: Config, device: str | torch.device = "cpu") -> Agent:
-    """PPO (FlyAgent or planner policy), TD3 or IQL for ``cfg.train.algo``, with fresh networks."""
-    return AGENTS[cfg.train.algo](cfg, device)
+def make_agent(cfg: Config, device: str | torch.device = "cpu", seed: int | None = None) -> Agent:
+    """PPO (FlyAgent or planner policy), TD3 or IQL for ``cfg.train.algo``, with fresh networks; given ``seed``,
+    their initial weights come from it and torch's global RNG is left as the caller had it."""
+    if seed is None:
+        return AGENTS[cfg.train.algo](cfg, device)
+    # torch's layers draw their initial weights from the global RNG only; forked, the caller's stream is untouched.
+    with torch.random.fork_rng():
+        torch.manual_seed(seed)
+        return AGENTS[cfg.train.algo](cfg, device)
 
 
 AGENTS = {

@@ -1,7 +1,7 @@
 """One FlyAgent environment behind the plain Gymnasium ``Env`` API (numpy in, numpy out).
 
 :class:`FlyEnv` wraps a :class:`~roshan.env.fly.FlyVectorEnv` with ``num_envs=1`` and is what
-``gymnasium.make("roshan/FlyAgent-v0")`` returns. It exists for tools that expect one ``gymnasium.Env``
+``gymnasium.make("roshan.env:roshan/FlyAgent-v0")`` returns. It exists for tools that expect one ``gymnasium.Env``
 (``check_env``, SB3-style wrappers, notebooks); training uses the vector env directly, which is much faster.
 
 The vector env resets an env in the same ``step`` call that ends its episode; this wrapper hides that: a step

@@ -53,6 +53,7 @@ import numpy as np
 import taichi as ti
 from PIL import Image
 
+from roshan import runtime
 from roshan.ggui import acquire_window, release_window
 from roshan.kernels.annotate import LegendItem, annotate
 from roshan.kernels.particles import P_X1, P_X2, P_Y, R_Y, radiation_position
@@ -246,14 +247,12 @@ class FrameRenderer:
     # ------------------------------------------------------------------------------------------ backends
 
     def _resolve_auto(self) -> None:
-        global _warned_no_ggui
         try:
             self._window = acquire_window((self.width, self.height), None)
             self._backend = "ggui"
         except Exception:  # any failure to open an offscreen window means no usable GGUI here
             self._backend = "raster"
-            if not _warned_no_ggui:
-                _warned_no_ggui = True
+            if runtime.warn_once("no ggui"):
                 warnings.warn(NO_GGUI_HINT, RuntimeWarning, stacklevel=_user_stacklevel())
 
     # ------------------------------------------------------------------------------------------ kernels
@@ -644,6 +643,3 @@ def _user_stacklevel() -> int:
         frame, level = frame.f_back, level + 1
     return level
 
-
-# The auto backend warns once per process when it falls back to raster.
-_warned_no_ggui = False

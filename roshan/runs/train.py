@@ -77,8 +77,7 @@ class Trainer:
         tc = cfg.train
         check_learnable(cfg)  # e.g. a PPO horizon that does not split over the rows: before anything is built
         self.generator = torch.Generator().manual_seed(cfg.sim.seed)
-        torch.manual_seed(cfg.sim.seed)
-        self.agent = make_agent(cfg, torch_device())
+        self.agent = make_agent(cfg, torch_device(), seed=cfg.sim.seed)
         self.progress = Progress()
         self.episodes = EpisodeLog(window=tc.objective_window)
         self.saved_update: int | None = None  # the update of the last latest.pt this process knows is whole

@@ -70,3 +70,22 @@ def test_actor_critic_shapes_and_sharing():
     n_shared = sum(p.numel() for p in shared.parameters())
     n_own = sum(p.numel() for p in own.parameters())
     assert n_own > n_shared
+
+
+def test_a_seeded_agent_leaves_torch_global_rng_as_it_was():
+    """make_agent(seed=) draws the initial weights from the seed alone (the same as after torch.manual_seed(seed)),
+    and the caller's global stream goes on as if nothing had been drawn."""
+    from roshan.algos.agents import make_agent
+    from roshan.config import Config
+
+    torch.manual_seed(123)
+    expected_next = torch.rand(3)
+    torch.manual_seed(7)
+    plain = make_agent(Config()).state_dict()["net"]
+    torch.manual_seed(123)
+    seeded = make_agent(Config(), seed=7).state_dict()["net"]
+    assert torch.equal(torch.rand(3), expected_next)
+    assert plain.keys() == seeded.keys()
+    assert all(torch.equal(plain[k], seeded[k]) for k in plain)
+    other = make_agent(Config(), seed=8).state_dict()["net"]
+    assert not all(torch.equal(plain[k], other[k]) for k in plain)

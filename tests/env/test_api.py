@@ -12,7 +12,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 from pettingzoo.test import parallel_api_test
 
-import roshan
+import roshan.env
 from roshan.config import Config, DroneConfig
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.pettingzoo import FlyParallelEnv
@@ -54,7 +54,7 @@ def run_to_end(env, seed):
 def test_registration_is_idempotent():
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # gymnasium warns when an id is registered again
-        importlib.reload(roshan)
+        importlib.reload(roshan.env)
     spec = gymnasium.spec(ENV_ID)
     assert spec.entry_point == "roshan.env.single:FlyEnv"
     assert spec.vector_entry_point == "roshan.env.fly:FlyVectorEnv"

@@ -7,6 +7,7 @@ import pytest
 import taichi as ti
 from PIL import Image
 
+from roshan import runtime
 from roshan.ggui import ggui_available
 from roshan.io import write_gif
 from roshan.kernels import particles as pt
@@ -209,7 +210,7 @@ def test_auto_falls_back_to_raster_with_one_warning(sim, monkeypatch):
         raise RuntimeError("Vulkan must be available for GGUI")
 
     monkeypatch.setattr(render, "acquire_window", no_vulkan)
-    monkeypatch.setattr(render, "_warned_no_ggui", False)
+    monkeypatch.setitem(runtime._per_process, "warned", set())  # warned once per process: as if none was given
     first = FrameRenderer(sim, env=0, cell_px=CELL_PX, particles=False, backend="auto")
     with pytest.warns(RuntimeWarning, match="mesa-vulkan-drivers"):
         frame = first.render()
