@@ -24,7 +24,7 @@ from pathlib import Path
 
 import torch
 
-from roshan.config import ALGO_LEVELS, PLANNER, Config, ConfigError, from_dict, to_dict, upgrade_config_dict
+from roshan.config import Config, ConfigError, from_dict, to_dict, upgrade_agent_state, upgrade_config_dict
 from roshan.io import atomic_file, inside, prepare_output, writing
 
 CHECKPOINTS = ("latest", "best_reward", "best_objective", "best_eval")
@@ -137,11 +137,8 @@ def upgrade_checkpoint(state: dict) -> dict:
     :func:`roshan.config.upgrade_config_dict`, and the planner PPO's single ``optimizer`` / ``scheduler`` as the
     lists of the one PPO class (the network weights are untouched)."""
     state = {**state, "config": upgrade_config_dict(state["config"])}
-    agent = state.get("agent")
-    if ALGO_LEVELS.get(state["algo"]) is PLANNER and isinstance(agent, dict) and "optimizer" in agent:
-        agent = {k: v for k, v in agent.items() if k not in ("optimizer", "scheduler")}
-        state["agent"] = {**agent, "optimizers": [state["agent"]["optimizer"]],
-                          "schedulers": [state["agent"]["scheduler"]]}
+    if "agent" in state:
+        state["agent"] = upgrade_agent_state(state["algo"], state["agent"])
     return state
 
 

@@ -17,7 +17,7 @@ from roshan.checkpoints import (
     resolve_checkpoint,
     setting,
 )
-from roshan.config import Config, apply_overrides
+from roshan.config import Config, apply_overrides, check_model_level
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
@@ -50,12 +50,11 @@ def check_fly_model(target: str | Path, key: str = "planner.fly_model") -> None:
     """Refuse a planner checkpoint as a low-level FlyAgent before any env is built: it would be asked to act on
     drone observations it has never seen."""
     path = resolve_checkpoint(fly_model_path(target, key))
-    refuse_planner(config_of_checkpoint(load_checkpoint(path), str(path)), target, path, key)
+    refuse_other_level(config_of_checkpoint(load_checkpoint(path), str(path)), target, path, key)
 
 
-def refuse_planner(cfg: Config, target: str | Path, path: Path, key: str) -> None:
-    if not cfg.train.level.flies:
-        raise ValueError(f"{key} = {str(target)!r}: {path} is a planner checkpoint; {key} needs a FlyAgent run")
+def refuse_other_level(cfg: Config, target: str | Path, path: Path, key: str) -> None:
+    check_model_level(key, cfg.train.level, f"{key} = {str(target)!r}: {path}")
 
 
 def check_setting(trained: Config, cfg: Config, where: str | Path) -> None:
@@ -90,7 +89,7 @@ class FrozenFlyPolicy:
     def __init__(self, target: str | Path, device: str | torch.device = "cpu", key: str = "planner.fly_model"):
         path = fly_model_path(target, key)
         self.config, agent, self.path = load_agent(path, device=device)
-        refuse_planner(self.config, target, self.path, key)
+        refuse_other_level(self.config, target, self.path, key)
         self.frames = self.config.fly.frames
         self._agent = agent
         self._act = policy_fn(agent)

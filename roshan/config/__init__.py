@@ -21,7 +21,6 @@ from roshan.config.agents import (
     RewardConfig,
 )
 from roshan.config.learning import (
-    FLY_ONLY_PPO_KEYS,
     IQLConfig,
     OptimConfig,
     PPOConfig,
@@ -29,7 +28,15 @@ from roshan.config.learning import (
     TD3Config,
     TrainConfig,
 )
-from roshan.config.levels import ALGO_LEVELS, FLY_AGENT, PLANNER, Level, level_of
+from roshan.config.levels import (
+    ALGO_LEVELS,
+    FLY_AGENT,
+    FLY_ONLY_PPO_KEYS,
+    PLANNER,
+    Level,
+    check_model_level,
+    level_of,
+)
 from roshan.config.schema import (
     ConfigError,
     choice,
@@ -51,7 +58,7 @@ from roshan.config.sim import (
     SimConfig,
     WindConfig,
 )
-from roshan.config.upgrade import MOVED_KEYS, upgrade_config_dict
+from roshan.config.upgrade import MOVED_KEYS, upgrade_agent_state, upgrade_config_dict
 
 
 @dataclass(frozen=True)
@@ -74,8 +81,7 @@ class Config(schema.Section):
 
     def __post_init__(self):
         super().__post_init__()  # each section is a section of its class (they validated themselves)
-        if not self.train.level.flies:
-            check_planner_ppo(self.ppo)
+        check_refused_keys(self)
         check_step_counts(self)
 
 
@@ -95,15 +101,16 @@ def check_step_counts(cfg: Config) -> None:
                               f"a step counter holds; expected at most {most:.4g} s")
 
 
-def check_planner_ppo(ppo: PPOConfig) -> None:
-    """The planner is trained by the same PPO as the FlyAgent, but the FlyAgent policy's keys mean nothing to
-    it: refuse them rather than ignore them."""
-    default = PPOConfig()
-    for key in FLY_ONLY_PPO_KEYS:
-        value = getattr(ppo, key)
-        if value != getattr(default, key):
-            raise ConfigError(f"ppo.{key} = {value!r} applies to the FlyAgent policy only, not to train.algo = "
-                              f"planner (leave it at {getattr(default, key)!r}; the network is planner.network)")
+def check_refused_keys(cfg: Config) -> None:
+    """Refuse a key the run's level does not read (``Level.refused_keys``) at a value other than its default,
+    rather than ignore it: the planner is trained by the same PPO as the FlyAgent, but the FlyAgent policy's keys
+    mean nothing to it."""
+    for dotted in cfg.train.level.refused_keys:
+        section, key = dotted.split(".")
+        value, default = getattr(getattr(cfg, section), key), getattr(type(getattr(cfg, section))(), key)
+        if value != default:
+            raise ConfigError(f"{dotted} = {value!r} applies to the FlyAgent policy only, not to train.algo = "
+                              f"{cfg.train.algo} (leave it at {default!r}; the network is planner.network)")
 
 
 def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = (), cls: type = Config,
@@ -143,6 +150,7 @@ __all__ = [
     "MapConfig",
     "FLY_ONLY_PPO_KEYS", "OptimConfig", "PPOConfig", "PlannerConfig", "PlannerRewardConfig", "RNDConfig",
     "RadiationConfig", "RewardConfig", "SimConfig", "TD3Config", "TrainConfig", "WindConfig", "all_keys",
-    "apply_overrides", "choice", "dump_config", "from_dict", "load_config", "load_run_config", "num", "replace",
-    "level_of", "show_keys", "suggest", "to_dict", "upgrade_config_dict",
+    "apply_overrides", "check_model_level", "choice", "dump_config", "from_dict", "load_config", "load_run_config",
+    "num", "replace",
+    "level_of", "show_keys", "suggest", "to_dict", "upgrade_agent_state", "upgrade_config_dict",
 ]

@@ -61,16 +61,11 @@ class OptimConfig(Section):
     min_lr: float = num(0.0, 0.0, doc="cosine: eta_min")
 
 
-# PPO keys that only the FlyAgent policy reads (its distribution, log-std schedule, encoders, minibatch shape).
-FLY_ONLY_PPO_KEYS = ("log_std", "decay_rate", "share_encoder", "use_tanh_dist", "tanh_entropy", "mean_bound",
-                     "mean_bound_coef", "separate_optimizers", "minibatch")
-
-
 @dataclass(frozen=True)
 class PPOConfig(Section):
     """PPO hyperparameters of either level (``train.algo`` ppo: the FlyAgent; planner: the PlannerAgent). Defaults
     are thesis Table 5.2 (E1, FlyAgent); the planner's Table 5.8 values are set in configs/planner*.yaml. The keys
-    in :data:`FLY_ONLY_PPO_KEYS` shape the FlyAgent policy and are refused for the planner."""
+    in :data:`roshan.config.levels.FLY_ONLY_PPO_KEYS` shape the FlyAgent policy and are refused for the planner."""
 
     lr: float = num(1.575e-4, 0.0, lo_open=True, doc="learning rate")
     horizon: int = num(1200, 1, doc="transitions collected per update (FlyAgent: all drones' steps; planner: "

@@ -51,6 +51,20 @@ def upgrade_planner_ppo(data: dict) -> dict:
     network = old.pop("network", None)
     if network is not None:
         data["planner"] = {**(data.get("planner") or {}), "network": network}
-    if ALGO_LEVELS.get((data.get("train") or {}).get("algo")) is PLANNER:
+    if _had_planner_ppo((data.get("train") or {}).get("algo")):
         data["ppo"] = {**OLD_PLANNER_PPO_DEFAULTS, **old}
     return data
+
+
+def upgrade_agent_state(algo: str, agent):
+    """An old planner PPO's single ``optimizer`` / ``scheduler`` as the lists of the one PPO class (the network
+    weights are untouched); any other agent state comes back as it is."""
+    if not (_had_planner_ppo(algo) and isinstance(agent, dict) and "optimizer" in agent):
+        return agent
+    rest = {k: v for k, v in agent.items() if k not in ("optimizer", "scheduler")}
+    return {**rest, "optimizers": [agent["optimizer"]], "schedulers": [agent["scheduler"]]}
+
+
+def _had_planner_ppo(algo) -> bool:
+    """Whether runs of ``algo`` were trained by the old planner PPO (the one place the upgrade asks the level)."""
+    return ALGO_LEVELS.get(algo) is PLANNER

@@ -568,13 +568,11 @@ def check_sources(spec: Spec, only: tuple[str, ...] = ()) -> None:
                 maps[key] = str(e)
         if maps[key] is not None:
             raise SpecError(f"{spec.path}: condition {condition.name}: map.name: {maps[key]}")
-        if cfg.train.level.flies and condition.trains:
-            continue
-        for model in ("fly_model", "explorer_model"):
+        for key in cfg.train.level.frozen_models:
             try:
-                resolve_checkpoint(getattr(cfg.planner, model))
+                resolve_checkpoint(getattr(cfg.planner, key.split(".", 1)[1]))
             except FileNotFoundError as e:
-                raise SpecError(f"{spec.path}: condition {condition.name}: planner.{model}: {e}") from None
+                raise SpecError(f"{spec.path}: condition {condition.name}: {key}: {e}") from None
 
 
 def run_experiment(spec: Spec, root: str | Path = "runs", storage: str | None = None, workers: int = 1,

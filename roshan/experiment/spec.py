@@ -167,13 +167,12 @@ class Run:
 
     def models(self) -> dict[str, tuple[str, str]]:
         """The trained models the run depends on without training them: config key (or ``buffer.model``) ->
-        (the setting, :func:`model_digest` of the checkpoint it loads). A FlyAgent that trains has none; a planner
-        and a scripted controller fly ``planner.fly_model`` and ``planner.explorer_model``; an offline condition
-        records its buffer with ``buffer.model``."""
+        (the setting, :func:`model_digest` of the checkpoint it loads): the level's frozen models (a FlyAgent has none;
+        a planner, trained or scripted, flies ``planner.fly_model`` and ``planner.explorer_model``), and an offline
+        condition's buffer as ``buffer.model``."""
         c = self.condition
         cfg = c.run_config(self.seed)
-        keys = () if cfg.train.level.flies and c.trains else ("planner.fly_model", "planner.explorer_model")
-        targets = {key: getattr(cfg.planner, key.split(".", 1)[1]) for key in keys}
+        targets = {key: getattr(cfg.planner, key.split(".", 1)[1]) for key in cfg.train.level.frozen_models}
         if c.buffer is not None:
             targets["buffer.model"] = c.buffer.model
         try:

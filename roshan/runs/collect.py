@@ -60,15 +60,9 @@ class EnvRows:
         return actions
 
 
-def level_rows(cfg: Config) -> DroneRows | EnvRows:
-    """The row adapter of the run's level: a row per drone for FlyAgents, per env for the planner."""
-    return DroneRows(cfg.drones.num_drones) if cfg.train.level.flies else EnvRows()
-
-
-def rollout_steps(cfg: Config, rows: DroneRows | EnvRows | None = None) -> int:
-    """Env steps per rollout: ``ppo.horizon`` transitions spread over the rows of all envs (``rows`` defaults to
-    the adapter of ``train.algo``)."""
-    rows = level_rows(cfg) if rows is None else rows
+def rollout_steps(cfg: Config, rows: DroneRows | EnvRows) -> int:
+    """Env steps per rollout: ``ppo.horizon`` transitions spread over the rows of all envs (``rows``: the level's
+    adapter, ``kit_of(cfg).rows(cfg)``)."""
     per_step = cfg.sim.envs * rows.per_env
     steps = cfg.ppo.horizon // per_step
     if steps < 1 or steps * per_step != cfg.ppo.horizon:

@@ -4,8 +4,7 @@ import os
 from pathlib import Path
 
 from roshan.config import Config
-from roshan.env.fly import FlyVectorEnv
-from roshan.env.planner import PlannerVectorEnv
+from roshan.runs.levels import kit_of
 
 
 def make_env(cfg: Config, num_envs: int, seed: int, evaluation: bool = False, controller: str = "planner",
@@ -13,10 +12,7 @@ def make_env(cfg: Config, num_envs: int, seed: int, evaluation: bool = False, co
     """The run's vector env: FlyAgent, or planner (``evaluation``: explorers fly and the candidates are the
     detected fires; ``controller="greedy"``: the heuristic baseline). ``render_mode="rgb_array"``: frames,
     with env 0's final frame of each episode kept."""
-    if cfg.train.level.flies:
-        return FlyVectorEnv(num_envs=num_envs, config=cfg, seed=seed, render_mode=render_mode)
-    return PlannerVectorEnv(num_envs, cfg, evaluation=evaluation, controller=controller, seed=seed,
-                            render_mode=render_mode)
+    return kit_of(cfg).env(cfg, num_envs, seed, evaluation, controller, render_mode)
 
 
 def caption_name(level: str, run_dir: Path) -> str:

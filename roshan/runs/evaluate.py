@@ -21,14 +21,15 @@ from roshan.algos.buffers import ReplayBuffer
 from roshan.algos.frozen import load_for_acting, policy_fn
 from roshan.algos.networks import flatten_drones
 from roshan.checkpoints import folder_lock, resolve_checkpoint
-from roshan.config import PLANNER, Config
+from roshan.config import Config, Level, check_model_level
 from roshan.env.fly import FlyVectorEnv
-from roshan.env.heuristics import straight_to_goal
 from roshan.episode import ENERGY_FIELDS, EPISODE_FIELDS, FIRE_FIELDS, REASONS, RECORD_FIELDS
 from roshan.io import OutputError, prepare_output, refuse_overwrite, write_gif, writing
 from roshan.io import progress_bar as new_bar
+from roshan.runs.baselines import BASELINES
 from roshan.runs.collect import next_observation
 from roshan.runs.envs import caption_name, make_env
+from roshan.runs.levels import kit_of
 from roshan.runs.provenance import code_version, settings_hash
 from roshan.runs.report.files import write_episodes_csv, write_summary_json
 from roshan.runs.report.notes import controller_notes, reach_note
@@ -129,46 +130,14 @@ def _save_frame(picture: np.ndarray, frames_dir: Path, k: int) -> None:
     Image.fromarray(picture).save(frames_dir / f"frame_{k:05d}.png")
 
 
-BASELINES = ("random", "greedy")
 # Under a FlyAgent of the simple policy (fly.policy: simple) a drone's task is to reach its goal, not to put out fire.
 SIMPLE_POLICY_NOTE = ("fly.policy = simple: an episode succeeds when the drones reach their goals; they put out no "
                       "fire, so Extinguished reads 0")
-# Which greedy heuristic a planner evaluation plays (planner.greedy_home), as its tables and JSON name it.
-GREEDY_HOME_NOTES = {
-    "original": "the original's heuristic, defect included: a fire on the groundstation cell is re-taken every step "
-                "and never put out, so the heuristic times out whenever that cell burns "
-                "(--set planner.greedy_home=fixed plays the fixed one)",
-    "fixed": "the heuristic with the original's groundstation defect fixed: a fire on the groundstation cell is put "
-             "out like any other",
-}
-
-
-def baseline_name(baseline: str, cfg: Config, planner: bool) -> tuple[str, str]:
-    """(column name, note) of ``baseline`` in a comparison: the planner's greedy says which heuristic it plays
-    (``greedy (original)`` or ``greedy (fixed)``, :data:`GREEDY_HOME_NOTES`), and ``resource-aware greedy (...)``
-    where it watches its batteries (a battery with ``planner.greedy_resources``); other baselines are their name."""
-    if baseline == "greedy" and planner:
-        home = cfg.planner.greedy_home
-        aware = cfg.planner.greedy_resources and cfg.drones.energy.enabled
-        name = f"resource-aware greedy ({home})" if aware else f"greedy ({home})"
-        note = f"{name}, planner.greedy_home = {home}: {GREEDY_HOME_NOTES[home]}"
-        if aware:
-            note += ("; it sends a drone home when its battery or tank runs low and waits there until both are full "
-                     "(planner.greedy_resources)")
-        return name, note
-    return baseline, ""
-# Where training and evaluation differ by design, the learning curves say why (and, from the run's own log, what
-# its training episodes did: :func:`training_note`).
-TRAINING_NOTES = {PLANNER.name: "Training episodes (Episodes/*) sample goals from the stochastic policy with the "
-                             "explorers at the groundstation; evaluation (Evaluation/*) takes the argmax goal with "
-                             "the explorers flying."}
-
-
-def training_note(level: str, scalars: dict) -> str | None:
-    """The learning curves' note for ``level``: :data:`TRAINING_NOTES` plus the training episodes' success rate at
-    the first and the last point of the run's log (``Episodes/success_rate``), so the note never contradicts the
-    curve under it."""
-    note = TRAINING_NOTES.get(level)
+def training_note(level: Level, scalars: dict) -> str | None:
+    """The learning curves' note for ``level`` (where its training and evaluation differ by design,
+    ``Level.training_note``) plus the training episodes' success rate at the first and the last point of the run's
+    log (``Episodes/success_rate``), so the note never contradicts the curve under it."""
+    note = level.training_note or None
     points = scalars.get("Episodes/success_rate")
     if note is None or not points:
         return note
@@ -183,32 +152,6 @@ def _say(line: str) -> None:
 
 def _quiet(line: str) -> None:
     pass
-
-
-def baseline_fn(name: str, num_envs: int, num_drones: int, seed: int):
-    """Scripted actions on flattened drone observations: ``random`` (uniform, seeded) or ``greedy`` (straight to
-    the goal, roshan.env.heuristics)."""
-    if name not in BASELINES:
-        raise ValueError(f"--baseline: expected one of {', '.join(BASELINES)}, got {name!r}")
-
-    if name == "greedy":
-        return lambda obs: straight_to_goal(obs["agent"].unsqueeze(1)).squeeze(1)
-    if name == "random":
-        g = torch.Generator().manual_seed(seed)
-        return lambda obs: torch.rand(obs["agent"].shape[0], 2, generator=g) * 2.0 - 1.0
-    raise AssertionError(name)
-
-
-def planner_random_fn(seed: int):
-    """Uniformly random valid candidates per drone (the planner's random baseline)."""
-    g = torch.Generator().manual_seed(seed)
-
-    def act(obs):
-        count = obs["fires_mask"].sum(-1, keepdim=True)  # valid prefix length, groundstation included
-        u = torch.rand(obs["drones"].shape[:2], generator=g)
-        return (u * count).long().clamp(max=obs["fires_mask"].shape[-1] - 1)
-
-    return act
 
 
 # The files that make an evaluation; a folder holding one of them holds results (the plots are rewritten by name).
@@ -348,13 +291,13 @@ def _write_outputs(episodes: dict, out_dir: Path, title: str, provenance, reason
 def _note_simple_policy(cfg: Config, summary: dict, out: Path) -> None:
     """Under a simple-policy FlyAgent a table of 100 % success beside 0 extinguished says why: in ``summary["note"]``
     (printed under the table) and at the end of ``table.txt``."""
-    if cfg.train.level.flies and cfg.fly.policy == "simple":
+    if not cfg.train.level.fights_fire(cfg):
         summary["note"] = SIMPLE_POLICY_NOTE
         with (out / "table.txt").open("a") as table:
             table.write(SIMPLE_POLICY_NOTE + "\n")
 
 
-def write_learning_curves(run_dir: Path, path: Path, title: str, level: str, say=_quiet) -> None:
+def write_learning_curves(run_dir: Path, path: Path, title: str, level: Level, say=_quiet) -> None:
     """The run's learning curves from its TensorBoard events (nothing where it has none), with the note of
     :func:`training_note` where training and evaluation differ by design."""
     tb = run_dir / "tb"
@@ -419,17 +362,10 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         env.caption_name = caption_name(env.default_caption_name, run_dir)
         eps = run_episodes(env, policy_fn(agent), episodes, seed, frames_dir, progress_bar)
         base_eps = None
-        planner = not cfg.train.level.flies
-        if baseline is not None and planner:  # the planner's baselines: greedy, random
-            if baseline not in BASELINES:
-                raise ValueError(f"--baseline: expected one of {', '.join(BASELINES)}, got {baseline!r}")
-            # The heuristic runs in its own env with the same seed and env count: identical fire layouts and wind.
-            base_env = make_env(cfg, E, seed, evaluation=True, controller=baseline) if baseline == "greedy" else env
-            act = planner_random_fn(seed) if baseline == "random" else (lambda obs: torch.zeros(E, env.num_drones))
+        kit = kit_of(cfg)
+        if baseline is not None:
+            base_env, act = kit.baseline(cfg, env, baseline, E, seed, make_env)
             base_eps = run_episodes(base_env, act, episodes, seed, progress_bar=progress_bar)
-        elif baseline is not None:
-            base_eps = run_episodes(env, baseline_fn(baseline, E, env.num_drones, seed), episodes, seed,
-                                    progress_bar=progress_bar)
         env.close()
         say = _say if progress_bar else _quiet
         who, reasons, dt = f"{cfg.train.algo} policy", env.failure_reasons, cfg.fire.dt
@@ -438,10 +374,10 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         summary = write_outputs(eps, out, f"{run_dir.name} ({path.stem}, {len(eps['time'])} episodes, seed {seed})",
                                 provenance, reasons, dt, who, say, setting_notes)
         _note_simple_policy(cfg, summary, out)
-        write_learning_curves(run_dir, out / "learning_curves.png", f"{run_dir.name}: {who}", cfg.train.level.name, say)
+        write_learning_curves(run_dir, out / "learning_curves.png", f"{run_dir.name}: {who}", cfg.train.level, say)
         payload = flyagent_json(summary, env.failure_reasons)
         if base_eps is not None:
-            name, note = baseline_name(baseline, cfg, planner)
+            name, note, extras = kit.baseline_name(baseline, cfg)
             base = write_outputs(base_eps, out / baseline, f"{name} baseline ({len(base_eps['time'])} episodes, "
                                                              f"seed {seed})", provenance, reasons, dt,
                                f"{name} baseline", say, setting_notes)
@@ -449,8 +385,7 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
             payload = {"policy": payload, baseline: flyagent_json(base, env.failure_reasons)}
             summary["baseline"] = base
             summary["baseline_name"], summary["baseline_note"] = name, note
-            if baseline == "greedy" and planner:
-                payload[baseline]["greedy_home"] = cfg.planner.greedy_home
+            payload[baseline].update(extras)
         payload["provenance"] = provenance
         if json_path is not None:
             with writing("the evaluation JSON", json_path):
@@ -476,9 +411,8 @@ def save_buffer(target: str | Path, transitions: int, path: Path, seed: int = 0,
     refuse_overwrite(path, "the replay buffer", replace)
     ensure_taichi()
     trained, cfg, agent, ckpt = load_for_acting(target, which, overrides, torch_device())
-    if not trained.train.level.flies:
-        raise ValueError(f"{ckpt}: a planner checkpoint; replay buffers record FlyAgent transitions (--save-buffer "
-                         "needs a FlyAgent run)")
+    check_model_level("buffer.model", trained.train.level,
+                      f"--save-buffer: replay buffers record FlyAgent transitions, but {ckpt}")
     prepare_output(path, "the replay buffer", is_dir=False)
     E = num_envs or cfg.train.eval_envs
     env = FlyVectorEnv(num_envs=E, config=cfg, fly=cfg.fly, seed=seed)

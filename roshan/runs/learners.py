@@ -18,7 +18,8 @@ from roshan.algos.ppo import PPO
 from roshan.config import Config
 from roshan.env.fly import FlyVectorEnv
 from roshan.episode import EPISODE_FIELDS
-from roshan.runs.collect import RolloutCollector, ended_rows, level_rows, next_observation, rollout_steps
+from roshan.runs.collect import RolloutCollector, ended_rows, next_observation, rollout_steps
+from roshan.runs.levels import kit_of
 
 
 class PPOLearner:
@@ -28,7 +29,7 @@ class PPOLearner:
     counts_env_steps = True  # train.total_steps is a budget of env steps (IQL's offline updates take none)
 
     def __init__(self, cfg: Config, env, agent: PPO):
-        self.rows = level_rows(cfg)
+        self.rows = kit_of(cfg).rows(cfg)
         self.steps = rollout_steps(cfg, self.rows)
         self.collector = RolloutCollector(env, agent, self.rows, self.steps)
         self.agent, self.env = agent, env
@@ -143,4 +144,4 @@ def make_learner(cfg: Config, env, agent):
 def check_learnable(cfg: Config) -> None:
     """Raise ValueError where ``cfg`` could not start training (checked before anything is built)."""
     if LEARNERS[cfg.train.algo] is PPOLearner:
-        rollout_steps(cfg)  # a rollout must split over the rows of all envs
+        rollout_steps(cfg, kit_of(cfg).rows(cfg))  # a rollout must split over the rows of all envs

@@ -17,8 +17,9 @@ from tqdm import tqdm
 from roshan.checkpoints import config_of_checkpoint, load_checkpoint, resolve_checkpoint
 from roshan.config import Config, apply_overrides
 from roshan.io import OutputError, write_atomic, writing
-from roshan.maps import LandCoverMap, MapError, check_drone_map, check_explorer_map, load_map
+from roshan.maps import LandCoverMap, MapError, check_drone_map, load_map
 from roshan.runs.evaluate import default_checkpoint, eval_root, evaluate_run, evaluation_name, held_results, output_lock
+from roshan.runs.levels import kit_of
 from roshan.runs.report.notes import ratio_is_meaningful
 from roshan.runtime import current_arch
 
@@ -35,12 +36,6 @@ def run_config(target: str | Path, which: str = "best") -> tuple[Config, Path]:
     return config_of_checkpoint(load_checkpoint(path), str(path)), path
 
 
-def _fights_fire(cfg: Config) -> bool:
-    """Whether the evaluated drones put fires out (as the env's ``fights_fire``: the planner and the complex
-    FlyAgent do, the simple FlyAgent flies to goals)."""
-    return not cfg.train.level.flies or cfg.fly.policy == "complex"
-
-
 def check_maps(maps: Sequence[str], trained: Config, overrides: Sequence[str] = ()) -> dict[str, LandCoverMap]:
     """Load every map of ``maps`` in the evaluation setting (``trained`` plus ``overrides``) and refuse, before any
     episode runs, one that cannot be evaluated: unknown or unreadable, too small for the drones or the fire
@@ -54,9 +49,9 @@ def check_maps(maps: Sequence[str], trained: Config, overrides: Sequence[str] = 
         try:
             land = load_map(cfg.map.name, band=cfg.map.band or None, rows=cfg.map.uniform_rows,
                             cols=cfg.map.uniform_cols)
-            check_drone_map(land, cfg.ignition.fire_percentage, _fights_fire(cfg), f"a {cfg.train.algo} evaluation")
-            if not cfg.train.level.flies:
-                check_explorer_map(land, cfg.planner.num_explorers)
+            check_drone_map(land, cfg.ignition.fire_percentage, cfg.train.level.fights_fire(cfg),
+                            f"a {cfg.train.algo} evaluation")
+            kit_of(cfg).check_map(land, cfg)
         except MapError as exc:
             raise MapError(f"--maps: map {spec!r} cannot be evaluated: {exc}") from exc
         if land.name in lands:

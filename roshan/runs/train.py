@@ -37,7 +37,7 @@ from roshan.io import OutputError, prepare_output, progress_bar, writing
 from roshan.runs.budget import budget_total
 from roshan.runs.envs import make_env
 from roshan.runs.episode_log import EpisodeLog
-from roshan.runs.evaluate import TRAINING_NOTES, evaluate_run, run_episodes
+from roshan.runs.evaluate import evaluate_run, run_episodes
 from roshan.runs.learners import check_learnable, make_learner
 from roshan.runs.report.stats import evaluation_scalars, summarize
 from roshan.runs.resume import resume_config, resume_state  # noqa: F401  (resume_config: cli's name)
@@ -110,9 +110,8 @@ class Trainer:
             writer.add_text("Run/resumed", f"resumed at update {self.progress.updates} ({self.progress.env_steps:,} "
                                            f"env steps): `{shlex.join(sys.argv)}`", self.log_step)
         add_config(writer, config_dict(self.cfg), self.log_step)
-        note = TRAINING_NOTES.get(self.cfg.train.level.name)
-        if note is not None:
-            writer.add_text("Run/note", note, self.log_step)
+        if self.cfg.train.level.training_note:
+            writer.add_text("Run/note", self.cfg.train.level.training_note, self.log_step)
         return writer
 
     def _final_metrics(self) -> dict[str, float]:

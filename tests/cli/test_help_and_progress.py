@@ -18,7 +18,8 @@ def cli(*args):
 @pytest.mark.slow
 def test_the_progress_bar_counts_whole_episodes_without_a_terminal(capsys):
     from roshan.env.fly import FlyVectorEnv
-    from roshan.runs.evaluate import baseline_fn, run_episodes
+    from roshan.runs.baselines import baseline_fn
+    from roshan.runs.evaluate import run_episodes
 
     cfg = Config(map=MapConfig(name="15x15_Woods"), ignition=IgnitionConfig(fire_percentage=0.05),
                  drones=DroneConfig(num_drones=2))

@@ -195,7 +195,8 @@ def test_the_legend_names_the_land_cover_and_tells_sealed_from_burned_out():
 
 @pytest.mark.slow
 def test_caption_episode_is_the_episodes_csv_number(tmp_path):
-    from roshan.runs.evaluate import baseline_fn, run_episodes
+    from roshan.runs.baselines import baseline_fn
+    from roshan.runs.evaluate import run_episodes
     from roshan.runs.report.files import read_episodes_csv, write_episodes_csv
 
     env = FlyVectorEnv(num_envs=2, config=CFG, seed=4)

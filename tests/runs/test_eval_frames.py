@@ -10,7 +10,8 @@ from PIL import Image
 from roshan.config import Config, DroneConfig, IgnitionConfig, MapConfig, PlannerConfig
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.planner import PlannerVectorEnv
-from roshan.runs.evaluate import baseline_fn, planner_random_fn, run_episodes
+from roshan.runs.baselines import baseline_fn, planner_random_fn
+from roshan.runs.evaluate import run_episodes
 
 MODEL = str(Path(__file__).resolve().parents[2] / "models" / "fly_simple")
 CFG = Config(map=MapConfig(name="15x15_Woods"), ignition=IgnitionConfig(fire_percentage=0.05),

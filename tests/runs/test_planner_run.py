@@ -68,39 +68,47 @@ def test_planner_trains_resumes_and_evaluates_against_greedy_on_the_same_episode
 
 
 def test_the_planner_greedy_baseline_is_named_by_its_groundstation_rule():
-    from roshan.config import Config, PlannerConfig
-    from roshan.runs.evaluate import baseline_name
+    from roshan.config import Config, PlannerConfig, TrainConfig
+    from roshan.runs.levels import kit_of
+
+    def baseline_name(name, cfg):
+        return kit_of(cfg).baseline_name(name, cfg)
 
     for home in ("original", "fixed"):
-        name, note = baseline_name("greedy", Config(planner=PlannerConfig(greedy_home=home)), planner=True)
+        cfg = Config(train=TrainConfig(algo="planner"), planner=PlannerConfig(greedy_home=home))
+        name, note, extras = baseline_name("greedy", cfg)
         assert name == f"greedy ({home})" and f"planner.greedy_home = {home}" in note
-    assert "never put out" in baseline_name("greedy", Config(planner=PlannerConfig(greedy_home="original")), True)[1]
-    assert baseline_name("greedy", Config(), planner=False) == ("greedy", "")  # the FlyAgent's straight-to-goal
+        assert extras == {"greedy_home": home}
+    original = Config(train=TrainConfig(algo="planner"), planner=PlannerConfig(greedy_home="original"))
+    assert "never put out" in baseline_name("greedy", original)[1]
+    assert baseline_name("greedy", Config()) == ("greedy", "", {})  # the FlyAgent's straight-to-goal
 
 
 def test_the_resource_aware_greedy_is_named_so():
     """With a battery the greedy watches it (planner.greedy_resources, on by default), and its column says so, as
     the README does: the endurance evaluation called it plain "greedy (fixed)"."""
-    from roshan.config import Config, DroneConfig, PlannerConfig
+    from roshan.config import Config, DroneConfig, PlannerConfig, TrainConfig
     from roshan.config.sim import EnergyConfig
-    from roshan.runs.evaluate import baseline_name
+    from roshan.runs.baselines import planner_baseline_name as baseline_name
 
+    planner = TrainConfig(algo="planner")
     battery = DroneConfig(energy=EnergyConfig(preset="scenario"))
-    name, note = baseline_name("greedy", Config(drones=battery), planner=True)
+    name, note, _ = baseline_name("greedy", Config(train=planner, drones=battery))
     assert name == "resource-aware greedy (fixed)" and "planner.greedy_resources" in note
-    blind = Config(drones=battery, planner=PlannerConfig(greedy_resources=False))
-    assert baseline_name("greedy", blind, planner=True)[0] == "greedy (fixed)"
-    assert baseline_name("greedy", Config(), planner=True)[0] == "greedy (fixed)"  # no battery to watch
+    blind = Config(train=planner, drones=battery, planner=PlannerConfig(greedy_resources=False))
+    assert baseline_name("greedy", blind)[0] == "greedy (fixed)"
+    assert baseline_name("greedy", Config(train=planner))[0] == "greedy (fixed)"  # no battery to watch
 
 
 def test_the_learning_curves_note_reads_the_training_episodes_from_the_log():
     """The note under a planner's learning curves said "time out: success 0 by design" under a training success
     curve at 1.0 for all 99 points (models/planner); it now says what the log holds."""
+    from roshan.config import FLY_AGENT, PLANNER
     from roshan.runs.evaluate import training_note
     from roshan.runs.report.scalars import read_tensorboard_scalars
 
     scalars = read_tensorboard_scalars(ROOT / "models" / "planner" / "tb")
-    note = training_note("planner", scalars)
+    note = training_note(PLANNER, scalars)
     assert "success 0" not in note and "time out" not in note
     assert "Training success 1.00 at the first point, 1.00 at the last." in note
-    assert training_note("planner", {}) is not None and training_note("FlyAgent", scalars) is None
+    assert training_note(PLANNER, {}) is not None and training_note(FLY_AGENT, scalars) is None
