@@ -18,14 +18,12 @@ import numpy as np
 from roshan import reproducible
 from roshan.experiment.findings import findings_markdown
 from roshan.experiment.runner import (
-    RESULT_ATTR,
     STUDY_ATTR,
     check_runs,
     experiment_dir,
     load_experiment,
     progress,
-    retired_before,
-    run_key,
+    results_of,
     spec_storage,
 )
 from roshan.experiment.spec import Condition, Reference, Run, Spec, load_spec
@@ -46,13 +44,6 @@ def rate(result: dict, metric: str) -> float:
     if metric == "success":
         return 100.0 * result["success_rate"]
     return 100.0 * result["failure_rates"].get(metric, 0.0)
-
-
-def results_of(study) -> dict[str, dict]:
-    """run key -> result of every finished run (its newest, leaving out results retired by ``--remake``)."""
-    retired = retired_before(study)
-    return {run_key(t): t.user_attrs[RESULT_ATTR] for t in study.get_trials(deepcopy=False)
-            if t.state.is_finished() and RESULT_ATTR in t.user_attrs and t.number >= retired.get(run_key(t), 0)}
 
 
 def done_results(spec: Spec, results: dict[str, dict], cond: Condition) -> list[dict]:

@@ -164,6 +164,13 @@ def retired_before(study: optuna.Study) -> dict[str, int]:
     return (study.user_attrs.get(STUDY_ATTR) or {}).get("retired", {})
 
 
+def results_of(study: optuna.Study) -> dict[str, dict]:
+    """run key -> result of every finished run (its newest, leaving out results retired by ``--remake``)."""
+    retired = retired_before(study)
+    return {run_key(t): t.user_attrs[RESULT_ATTR] for t in study.get_trials(deepcopy=False)
+            if t.state.is_finished() and RESULT_ATTR in t.user_attrs and t.number >= retired.get(run_key(t), 0)}
+
+
 def newest_trials(study: optuna.Study) -> dict[str, optuna.trial.FrozenTrial]:
     """run key -> its newest trial (any state)."""
     newest = {}
@@ -266,9 +273,7 @@ def carry_results(source: optuna.Study, spec: Spec, storage, only: tuple[str, ..
     the same in both, its fingerprint under ``spec`` the one ``source`` stored, else nothing is recorded. Runs that
     ``spec``'s study already finished are left alone. Returns how many were recorded."""
     stored = _wait_for_meta(source)["runs"]
-    results = {run_key(t): t.user_attrs[RESULT_ATTR] for t in source.get_trials(deepcopy=False)
-               if t.state == TrialState.COMPLETE and RESULT_ATTR in t.user_attrs
-               and t.number >= retired_before(source).get(run_key(t), 0)}
+    results = results_of(source)
     prints = {k: fp for k, fp in spec.fingerprints().items() if k in results and (not only or k.split("/")[0] in only)}
     differ = [k for k, fp in prints.items() if stored.get(k) != fp]
     if differ:

@@ -26,7 +26,6 @@ from roshan.experiment.report import (
     per_seed_csv,
     rate,
     report_experiment,
-    results_of,
 )
 from roshan.experiment.runner import (
     RERUN_ATTR,
@@ -40,6 +39,7 @@ from roshan.experiment.runner import (
     prepare_experiment,
     progress,
     queue_reruns,
+    results_of,
     run_dir,
     run_experiment,
     run_key,
