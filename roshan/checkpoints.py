@@ -163,7 +163,7 @@ def setting(cfg: Config, key: str):
 
 def model_keys(cfg: Config) -> tuple[str, ...]:
     """The config keys that decide the network shapes of ``cfg.train.algo`` and the observations it serves."""
-    return cfg.train.level.model_keys(cfg.train.algo)
+    return cfg.train.level.model_keys(cfg)
 
 
 def optimiser_keys(cfg: Config) -> tuple[str, ...]:

@@ -271,21 +271,25 @@ def embed(in_features: int, hidden: int = HIDDEN) -> nn.Sequential:
 class PlannerEncoder(nn.Module):
     """Drone tokens from position, goal, id, velocity and water, plus the global fire context; self-attention
     among drones, then cross-attention to the fire candidates, each with a residual and LayerNorm
-    (docs/model/learning.md §3.2)."""
+    (docs/model/learning.md §3.2). Without ``ids`` a drone is told apart by its own state alone: nothing depends on
+    the number of drones or their order (:class:`FleetPlannerNet`)."""
 
-    def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS, resources: bool = False):
+    def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS, resources: bool = False,
+                 ids: bool = True):
         super().__init__()
         self.pos_emb, self.goal_emb, self.vel_emb = embed(2), embed(2), embed(2)
         self.water_emb, self.fire_emb = embed(1), embed(2)
         self.count_emb, self.centroid_emb, self.wind_emb = embed(1), embed(2), embed(2)
-        self.id_emb = nn.Embedding(num_drones, hidden)
-        self.fusion = nn.Sequential(Linear(5 * hidden, 2 * hidden), nn.ReLU(), Linear(2 * hidden, hidden),
+        self.id_emb = nn.Embedding(num_drones, hidden) if ids else None
+        parts = 5 if ids else 4
+        self.fusion = nn.Sequential(Linear(parts * hidden, 2 * hidden), nn.ReLU(), Linear(2 * hidden, hidden),
                                     nn.ReLU())
         self.self_attn = nn.MultiheadAttention(hidden, heads, batch_first=True)
         self.self_norm = nn.LayerNorm(hidden)
         self.cross_attn = nn.MultiheadAttention(hidden, heads, batch_first=True)
         self.cross_norm = nn.LayerNorm(hidden)
-        self.register_buffer("drone_ids", torch.arange(num_drones), persistent=False)
+        if ids:
+            self.register_buffer("drone_ids", torch.arange(num_drones), persistent=False)
         # with a battery, each drone's energy pair is added to its fused token (without one the encoder is the
         # one before)
         self.energy_emb = embed(2) if resources else None
@@ -295,8 +299,8 @@ class PlannerEncoder(nn.Module):
         pos, g = obs["drones"], obs["globals"]
         valid = candidate_validity(obs["fires_mask"])
         # velocity = pos_t - pos_{t-1}: always 0, the planner keeps one frame (docs/model/learning.md §3.2)
-        tokens = torch.cat([self.pos_emb(pos), self.goal_emb(obs["goals"]),
-                            self.id_emb(self.drone_ids).expand(pos.shape[0], -1, -1),
+        ids = [] if self.id_emb is None else [self.id_emb(self.drone_ids).expand(pos.shape[0], -1, -1)]
+        tokens = torch.cat([self.pos_emb(pos), self.goal_emb(obs["goals"]), *ids,
                             self.vel_emb(torch.zeros_like(pos)), self.water_emb(obs["water"])], dim=-1)
         context = self.count_emb(g[:, 0:1]) + self.centroid_emb(g[:, 1:3]) + self.wind_emb(g[:, 3:5])
         d = self.fusion(tokens) + context.unsqueeze(1)
@@ -313,10 +317,12 @@ class PointerPlannerNet(nn.Module):
     drones (each fire at most once per decision, the groundstation any number of times, a learnable soft penalty on
     repeats) and an attention-pooled critic on the shared encoder."""
 
+    knows_ids = True  # each drone's id is embedded: the net flies the fleet size it was built for
+
     def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS,
                  temperature: float = 1.0, resources: bool = False, distance_prior: float = 0.0):
         super().__init__()
-        self.encoder = PlannerEncoder(num_drones, hidden, heads, resources)
+        self.encoder = PlannerEncoder(num_drones, hidden, heads, resources, ids=self.knows_ids)
         self.query_proj = Linear(hidden, hidden)
         self.key_proj = Linear(hidden, hidden)
         self.log_temperature = nn.Parameter(torch.zeros(1))
@@ -394,4 +400,13 @@ class PointerPlannerNet(nn.Module):
         return [self.pool_query, *self.pool_attn.parameters(), *self.value_head.parameters()]
 
 
-PLANNER_NETS = {"thesis": ThesisPlannerNet, "pointer": PointerPlannerNet}
+class FleetPlannerNet(PointerPlannerNet):
+    """The pointer net for any fleet: no drone ids, so a drone is told apart by its own state (position, goal, tank,
+    battery) and one set of weights flies any number of drones. The encoder is permutation-equivariant: permuting the
+    drones permutes their representations and their goal scores. Decoding still goes in index order (each fire at
+    most once per decision), so where two drones want the same fire, the earlier index gets it."""
+
+    knows_ids = False
+
+
+PLANNER_NETS = {"thesis": ThesisPlannerNet, "pointer": PointerPlannerNet, "fleet": FleetPlannerNet}

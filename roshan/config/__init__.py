@@ -30,6 +30,7 @@ from roshan.config.learning import (
 )
 from roshan.config.levels import (
     ALGO_LEVELS,
+    ANY_FLEET_NETWORKS,
     FLY_AGENT,
     FLY_ONLY_PPO_KEYS,
     PLANNER,
@@ -144,7 +145,8 @@ load_run_config = load_config
 
 
 __all__ = [
-    "ALGO_LEVELS", "CONTROLLERS", "FLY_AGENT", "Level", "PLANNER", "PLANNER_NEWEST_TERMS", "PLANNER_PRESETS",
+    "ALGO_LEVELS", "ANY_FLEET_NETWORKS", "CONTROLLERS", "FLY_AGENT", "Level", "PLANNER", "PLANNER_NEWEST_TERMS",
+    "PLANNER_PRESETS",
     "PRESETS", "Config", "ConfigError",
     "ConvectionConfig", "DroneConfig", "EnergyConfig", "FireConfig", "FlyConfig", "IQLConfig", "IgnitionConfig",
     "MapConfig",

@@ -138,8 +138,9 @@ class PlannerConfig(Section):
                                     "drone's logits, w learned from w0 (a closer fire likelier); 0 = off, the "
                                     "networks as they were")
     distinct_goals: bool = False  # thesis net: drones choose in id order, each from the fires no earlier one took
-    network: str = choice("thesis", ("thesis", "pointer"),
-                          doc="the planner network: docs/model/learning.md §3.1 (thesis) or §3.2 (pointer, newest)")
+    network: str = choice("thesis", ("thesis", "pointer", "fleet"),
+                          doc="the planner network: docs/model/learning.md §3.1 (thesis), §3.2 (pointer, newest), or "
+                              "fleet: the pointer net without drone ids, whose weights fly any number of drones")
     rewards: PlannerRewardConfig = field(default_factory=PlannerRewardConfig)
 
     def inert(self, battery: bool) -> list[str]:

@@ -14,6 +14,11 @@ builds, one per level, picked by name in ``roshan/runs/levels.py``. No module as
 from collections.abc import Callable
 from dataclasses import dataclass
 
+# The planner networks without drone ids: one set of weights flies any number of drones, so the fleet size
+# (FLEET_SIZE) is not a model key of theirs (roshan/algos/planner_nets.py: FleetPlannerNet; a test keeps the two
+# lists in step).
+ANY_FLEET_NETWORKS = ("fleet",)
+FLEET_SIZE = "drones.num_drones"
 # The ppo keys that configure the FlyAgent policy (its distribution, its encoder): the planner's policy has its own
 # network (planner.network) and refuses them rather than ignoring them.
 FLY_ONLY_PPO_KEYS = ("log_std", "decay_rate", "share_encoder", "use_tanh_dist", "tanh_entropy", "mean_bound",
@@ -40,10 +45,13 @@ class Level:
     fights_fire: Callable[[object], bool]  # whether its drones put fires out under a config (else they fly to goals)
     training_note: str = ""  # where its training episodes differ from its evaluation by design, the curves say why
 
-    def model_keys(self, algo: str) -> tuple[str, ...]:
-        """The config keys that decide the network shapes of ``algo`` at this level and the observations it serves."""
-        section = ALGO_SECTIONS[algo]
-        return ("train.algo", *self.shape_keys, *(f"{section}.{k}" for k in self.section_shape_keys))
+    def model_keys(self, cfg) -> tuple[str, ...]:
+        """The config keys that decide the network shapes of ``cfg``'s algo at this level and the observations it
+        serves; the number of drones is not one of them for a network that flies any fleet (ANY_FLEET_NETWORKS)."""
+        section = ALGO_SECTIONS[cfg.train.algo]
+        any_fleet = cfg.planner.network in ANY_FLEET_NETWORKS
+        shape = (k for k in self.shape_keys if not (any_fleet and k == FLEET_SIZE))
+        return ("train.algo", *shape, *(f"{section}.{k}" for k in self.section_shape_keys))
 
 
 FLY_AGENT = Level("FlyAgent", shape_keys=("fly.collision", "fly.frames"), section_shape_keys=("share_encoder",),

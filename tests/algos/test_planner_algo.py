@@ -4,7 +4,13 @@ import pytest
 import torch
 
 from roshan.algos.agents import planner_ppo
-from roshan.algos.planner_nets import PointerPlannerNet, ThesisPlannerNet, trim_candidates
+from roshan.algos.planner_nets import (
+    PLANNER_NETS,
+    FleetPlannerNet,
+    PointerPlannerNet,
+    ThesisPlannerNet,
+    trim_candidates,
+)
 from roshan.algos.ppo import PPO, Rollout
 from roshan.config import PPOConfig, RNDConfig
 
@@ -238,7 +244,7 @@ def bandit_rollout(agent: PPO, obs: dict, T: int, g: torch.Generator) -> Rollout
                    torch.stack([s.value for s in samples]), torch.zeros(T, E), rewards, done, torch.zeros_like(done))
 
 
-@pytest.mark.parametrize("network", ["thesis", "pointer"])
+@pytest.mark.parametrize("network", ["thesis", "pointer", "fleet"])
 def test_planner_ppo_learns_a_joint_bandit(network):
     torch.manual_seed(0)
     g = torch.Generator().manual_seed(5)
@@ -256,7 +262,7 @@ def test_planner_ppo_learns_a_joint_bandit(network):
     assert agent.updates == 20 and agent.gradient_steps == 20 * 4 * 2
 
 
-@pytest.mark.parametrize("network", ["thesis", "pointer"])
+@pytest.mark.parametrize("network", ["thesis", "pointer", "fleet"])
 def test_state_dict_round_trip_gives_identical_outputs(network):
     torch.manual_seed(0)
     g = torch.Generator().manual_seed(6)
@@ -383,3 +389,70 @@ def test_distinct_goals_give_each_fire_to_one_drone_and_are_scored_as_they_were_
     two_fires = random_obs(16, N, K, g, n_valid=torch.full((16,), 3))  # groundstation + 2 fires for 3 drones
     shared = sampler.forward_act(two_fires, generator=g)[0]
     assert bool((shared > 0).all()) and bool((shared[:, 0] != shared[:, 1]).all())
+
+
+# ---------------------------------------------------------------------------------------------- any fleet
+
+
+def permuted(obs: dict, order: torch.Tensor) -> dict:
+    """The same scenes with the drones (axis 1 of the per-drone parts) in ``order``."""
+    return {k: v[:, order] if k in ("drones", "goals", "water", "energy") else v for k, v in obs.items()}
+
+
+def test_the_fleet_net_is_blind_to_the_drones_order():
+    """Permuting the drones permutes their representations and goal scores, and leaves the value as it was: no drone
+    is known by its index."""
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(11)
+    net = FleetPlannerNet(num_drones=5)
+    obs = random_obs(6, 5, 7, g)
+    order = torch.tensor([3, 0, 4, 1, 2])
+    d, fires, valid = net.encoder(obs)
+    dp, _, _ = net.encoder(permuted(obs, order))
+    assert torch.allclose(dp, d[:, order], atol=1e-5)
+    assert torch.allclose(net.base_logits(dp, fires, permuted(obs, order)), net.base_logits(d, fires, obs)[:, order],
+                          atol=1e-5)
+    assert torch.allclose(net.value(permuted(obs, order)), net.value(obs), atol=1e-5)
+    pointer = PointerPlannerNet(num_drones=5)  # the check can fail: the id embedding tells drones apart
+    assert not torch.allclose(pointer.encoder(permuted(obs, order))[0], pointer.encoder(obs)[0][:, order], atol=1e-3)
+
+
+def test_where_no_two_drones_want_one_fire_permuting_them_permutes_their_goals():
+    """A strong distance prior sends each drone to the fire under it; drones on distinct fires want distinct fires,
+    so the order of decoding decides nothing and the decisions follow the drones."""
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(12)
+    N, K = 4, 8
+    obs = random_obs(3, N, K, g, n_valid=torch.tensor([K, K, K]))
+    obs["drones"] = obs["fires"][:, 1:N + 1].clone()  # drone i sits on candidate i + 1
+    net = FleetPlannerNet(N, distance_prior=1000.0)
+    order = torch.tensor([2, 0, 3, 1])
+    actions = net.forward_act(obs, deterministic=True)[0]
+    assert torch.equal(actions, torch.arange(1, N + 1).expand(3, -1))
+    assert torch.equal(net.forward_act(permuted(obs, order), deterministic=True)[0], actions[:, order])
+
+
+def test_one_fleet_net_flies_any_number_of_drones():
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(13)
+    trained = FleetPlannerNet(num_drones=4)
+    for n in (2, 4, 8, 16):
+        other = FleetPlannerNet(num_drones=n)
+        other.load_state_dict(trained.state_dict())  # the same weights whatever the fleet
+        actions, log_prob, entropy, value = other.forward_act(random_obs(5, n, 20, g))
+        assert actions.shape == (5, n) and log_prob.shape == value.shape == (5,)
+        assert torch.isfinite(log_prob).all() and torch.isfinite(value).all()
+    with pytest.raises(RuntimeError):  # an id-embedding net is built for one fleet size
+        PointerPlannerNet(num_drones=8).load_state_dict(PointerPlannerNet(num_drones=4).state_dict())
+
+
+def test_the_fleet_size_is_a_model_key_except_for_the_fleet_net():
+    from roshan.checkpoints import config_differences, model_keys
+    from roshan.config import ANY_FLEET_NETWORKS, load_config
+
+    assert ANY_FLEET_NETWORKS == tuple(n for n, net in PLANNER_NETS.items() if getattr(net, "knows_ids", True) is False)
+    for network, refused in (("pointer", True), ("fleet", False)):
+        four = load_config(None, ["train.algo=planner", f"planner.network={network}", "drones.num_drones=4"])
+        sixteen = load_config(None, ["train.algo=planner", f"planner.network={network}", "drones.num_drones=16"])
+        diffs = config_differences(sixteen, four, model_keys(four))
+        assert bool(diffs) is refused, (network, diffs)
