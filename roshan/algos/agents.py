@@ -7,7 +7,7 @@ from roshan.algos.iql import IQL
 from roshan.algos.policies import FlyPolicy, PlannerPolicy
 from roshan.algos.ppo import PPO
 from roshan.algos.td3 import TD3
-from roshan.config import Config, PPOConfig, RNDConfig
+from roshan.config import Config, PlannerConfig, PPOConfig, RNDConfig
 
 
 def fly_ppo(cfg: PPOConfig, collision: bool, frames: int = 3, device: str | torch.device = "cpu",
@@ -16,14 +16,11 @@ def fly_ppo(cfg: PPOConfig, collision: bool, frames: int = 3, device: str | torc
     return PPO(cfg, FlyPolicy(cfg, collision, frames), device, rnd)
 
 
-def planner_ppo(cfg: PPOConfig, network: str, num_drones: int, device: str | torch.device = "cpu",
-                rnd: RNDConfig | None = None, temperature: float = 1.0, resources: bool = False,
-                distance_prior: float = 0.0, distinct_goals: bool = False) -> PPO:
-    """PPO over a planner network (``planner.network``, ``planner.temperature``, ``planner.distance_prior``,
-    ``planner.distinct_goals``); ``resources``: the drones have a battery (``drones.energy``), which the network
-    reads."""
-    return PPO(cfg, PlannerPolicy(network, num_drones, temperature, resources, distance_prior, distinct_goals),
-               device, rnd)
+def planner_ppo(cfg: PPOConfig, planner: PlannerConfig, num_drones: int, device: str | torch.device = "cpu",
+                rnd: RNDConfig | None = None, resources: bool = False) -> PPO:
+    """PPO over the planner network ``planner`` (the section) describes; ``resources``: the drones have a battery
+    (``drones.energy``), which the network reads."""
+    return PPO(cfg, PlannerPolicy(planner, num_drones, resources), device, rnd)
 
 
 def make_agent(cfg: Config, device: str | torch.device = "cpu", seed: int | None = None) -> Agent:
@@ -39,9 +36,8 @@ def make_agent(cfg: Config, device: str | torch.device = "cpu", seed: int | None
 
 AGENTS = {
     "ppo": lambda cfg, device: fly_ppo(cfg.ppo, cfg.fly.collision, cfg.fly.frames, device, cfg.rnd),
-    "planner": lambda cfg, device: planner_ppo(cfg.ppo, cfg.planner.network, cfg.drones.num_drones, device, cfg.rnd,
-                                               cfg.planner.temperature, cfg.drones.energy.enabled,
-                                               cfg.planner.distance_prior, cfg.planner.distinct_goals),
+    "planner": lambda cfg, device: planner_ppo(cfg.ppo, cfg.planner, cfg.drones.num_drones, device, cfg.rnd,
+                                               cfg.drones.energy.enabled),
     "td3": lambda cfg, device: TD3(cfg.td3, cfg.fly.collision, cfg.fly.frames, device),
     "iql": lambda cfg, device: IQL(cfg.iql, cfg.fly.collision, cfg.fly.frames, device),
 }

@@ -23,7 +23,7 @@ from roshan.algos.distributions import ClippedGaussian, TanhNormal
 from roshan.algos.frames import FrameCache, NoCache, gather_stacks
 from roshan.algos.networks import ActorCritic
 from roshan.algos.planner_nets import PLANNER_NETS, trim_candidates
-from roshan.config import PPOConfig
+from roshan.config import PlannerConfig, PPOConfig
 
 AGENT_FEATURES = 9  # per frame of a FlyAgent's own observation (roshan.algos.networks)
 
@@ -169,12 +169,13 @@ class PlannerPolicy:
     # both planner critics read the actor's encoder (thesis Table 5.8, docs/model/learning.md §3.2)
     shares_encoder = True
 
-    def __init__(self, network: str, num_drones: int, temperature: float = 1.0, resources: bool = False,
-                 distance_prior: float = 0.0, distinct_goals: bool = False):
-        # the pointer net always decodes distinct goals; the thesis net on request (planner.distinct_goals)
-        distinct = {"distinct_goals": distinct_goals} if network == "thesis" else {}
-        self.net = PLANNER_NETS[network](num_drones, temperature=temperature, resources=resources,
-                                         distance_prior=distance_prior, **distinct)
+    def __init__(self, planner: PlannerConfig, num_drones: int, resources: bool = False):
+        """``planner``: the section (network, temperature, distance_prior, distinct_goals); ``resources``: the drones
+        carry a battery, which the network reads."""
+        # the pointer nets always decode distinct goals; the thesis net on request (planner.distinct_goals)
+        distinct = {"distinct_goals": planner.distinct_goals} if planner.network == "thesis" else {}
+        self.net = PLANNER_NETS[planner.network](num_drones, temperature=planner.temperature, resources=resources,
+                                                 distance_prior=planner.distance_prior, **distinct)
         self.novelty_dim = (7 if resources else 5) * num_drones + 5
 
     @staticmethod

@@ -12,7 +12,7 @@ from roshan.algos.planner_nets import (
     trim_candidates,
 )
 from roshan.algos.ppo import PPO, Rollout
-from roshan.config import PPOConfig, RNDConfig
+from roshan.config import PlannerConfig, PPOConfig, RNDConfig
 
 NETS = [ThesisPlannerNet, PointerPlannerNet]
 
@@ -249,7 +249,7 @@ def test_planner_ppo_learns_a_joint_bandit(network):
     torch.manual_seed(0)
     g = torch.Generator().manual_seed(5)
     cfg = PPOConfig(lr=3e-3, horizon=8 * 16, batch_size=64, k_epochs=4, entropy_coeff=0.0, value_loss_coef=0.5)
-    agent = planner_ppo(cfg, network, num_drones=2)
+    agent = planner_ppo(cfg, PlannerConfig(network=network), num_drones=2)
     one = random_obs(1, 2, 4, g, n_valid=torch.tensor([4]))  # one fixed scene, seen by 16 envs
     obs = {k: v.expand(16, *v.shape[1:]) for k, v in one.items()}
     first = float(bandit_rollout(agent, obs, 8, g).rewards.mean())
@@ -267,9 +267,9 @@ def test_state_dict_round_trip_gives_identical_outputs(network):
     torch.manual_seed(0)
     g = torch.Generator().manual_seed(6)
     cfg = PPOConfig(horizon=32, batch_size=16)
-    a = planner_ppo(cfg, network, num_drones=3)
+    a = planner_ppo(cfg, PlannerConfig(network=network), num_drones=3)
     a.update(bandit_rollout(a, random_obs(8, 3, 6, g), 4, g), g)
-    b = planner_ppo(cfg, network, num_drones=3)
+    b = planner_ppo(cfg, PlannerConfig(network=network), num_drones=3)
     b.load_state_dict(a.state_dict())
     obs = random_obs(16, 3, 6, g)
     sa = a.sample(obs, generator=torch.Generator().manual_seed(7))
@@ -282,7 +282,7 @@ def test_state_dict_round_trip_gives_identical_outputs(network):
 
 def test_planner_rnd_reads_drones_goals_water_and_globals():
     g = torch.Generator().manual_seed(8)
-    agent = planner_ppo(PPOConfig(horizon=32, batch_size=16), "thesis", num_drones=3,
+    agent = planner_ppo(PPOConfig(horizon=32, batch_size=16), PlannerConfig(), num_drones=3,
                         rnd=RNDConfig(enabled=True, hidden=16, out=8))
     obs = random_obs(8, 3, 6, g)
     features = agent.policy.novelty_features(obs)
@@ -354,7 +354,7 @@ def test_a_strong_distance_prior_makes_each_drone_choose_its_nearest_fire():
 def test_the_distance_priors_weight_is_learned_by_the_actors_optimiser():
     g = torch.Generator().manual_seed(4)
     obs = random_obs(16, 2, 6, g)
-    agent = planner_ppo(PPOConfig(), "thesis", 2, distance_prior=10.0)
+    agent = planner_ppo(PPOConfig(), PlannerConfig(distance_prior=10.0), 2)
     prior = agent.policy.net.prior.log_weight
     assert any(p is prior for p in agent.groups["actor"]) and not any(p is prior for p in agent.groups["critic"])
     actions = agent.policy.net.forward_act(obs, generator=g)[0]
