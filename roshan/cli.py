@@ -306,8 +306,10 @@ def train(config_path, name, root, resume_dir, no_eval, quiet, sets, arch, threa
               help="PNG frames of env 0's first episode.")
 @click.option("--gif", "gif_path", type=click.Path(dir_okay=False), default=None, callback=_gif_name,
               help="GIF of env 0's first episode.")
-@click.option("--baseline", type=click.Choice(["random", "greedy"]), default=None,
-              help="Also run this scripted policy on the same episodes and print both side by side.")
+@click.option("--baseline", type=click.Choice(["random", "greedy", "clairvoyant"]), default=None,
+              help="Also run this scripted policy on the same episodes and print both side by side. A planner's "
+                   "clairvoyant reference sees every burning cell from the start and assigns drones to fires by the "
+                   "least summed flight time each decision.")
 @click.option("--save-buffer", nargs=2, type=(click.IntRange(min=1), click.Path(dir_okay=False)), default=None,
               metavar="N FILE", help="Instead: record N transitions of the deterministic policy (an IQL dataset).")
 @click.option("--maps", default=None, callback=_name_list, metavar="A,B,C",
