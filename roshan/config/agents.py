@@ -6,7 +6,8 @@ Reward presets are data (thesis Tables 5.3-5.5, 5.7, 5.9); the ``ti.func``s that
 
 from dataclasses import dataclass, field
 
-from roshan.config.schema import INT32_MAX, Section, choice, num
+from roshan.config.levels import ANY_FLEET_NETWORKS
+from roshan.config.schema import INT32_MAX, ConfigError, Section, choice, num
 
 # Thesis Table 5.3 (defaults), Table 5.4 (best single Optuna trial), Table 5.5 (mean of the top-10 trials).
 PRESETS: dict[str, dict[str, float]] = {
@@ -141,7 +142,24 @@ class PlannerConfig(Section):
     network: str = choice("thesis", ("thesis", "pointer", "fleet"),
                           doc="the planner network: docs/model/learning.md §3.1 (thesis), §3.2 (pointer, newest), or "
                               "fleet: the pointer net without drone ids, whose weights fly any number of drones")
+    fleet_sizes: str = ""  # e.g. "4,8,16": training takes these fleets in turn, an update each (fleet network only)
     rewards: PlannerRewardConfig = field(default_factory=PlannerRewardConfig)
+
+    def __post_init__(self):
+        super().__post_init__()
+        sizes = self.fleet_sizes.replace(" ", "").split(",") if self.fleet_sizes.strip() else []
+        if not all(s.isdigit() and int(s) >= 1 for s in sizes):
+            raise ConfigError(f"PlannerConfig: planner.fleet_sizes = {self.fleet_sizes!r}: expected positive drone "
+                              "counts separated by commas, such as '4,8,16' (or '' to train one fleet)")
+        if sizes and self.network not in ANY_FLEET_NETWORKS:
+            raise ConfigError(f"PlannerConfig: planner.fleet_sizes = {self.fleet_sizes!r} needs a network that flies "
+                              f"any fleet (planner.network: {' or '.join(ANY_FLEET_NETWORKS)}); the {self.network} "
+                              "net embeds drone ids and flies one fleet size")
+
+    @property
+    def fleets(self) -> tuple[int, ...]:
+        """The fleet sizes training takes in turn (``fleet_sizes``); () for one fleet, ``drones.num_drones``."""
+        return tuple(int(s) for s in self.fleet_sizes.replace(" ", "").split(",")) if self.fleet_sizes.strip() else ()
 
     def inert(self, battery: bool) -> list[str]:
         """Settings that change nothing (or nothing useful) here, each as a warning line; ``battery``:

@@ -15,7 +15,7 @@ import torch
 from roshan.algos.buffers import ReplayBuffer
 from roshan.algos.networks import flatten_drones
 from roshan.algos.ppo import PPO
-from roshan.config import Config
+from roshan.config import Config, apply_overrides
 from roshan.env.fly import FlyVectorEnv
 from roshan.episode import EPISODE_FIELDS
 from roshan.runs.collect import RolloutCollector, ended_rows, next_observation, rollout_steps
@@ -143,5 +143,11 @@ def make_learner(cfg: Config, env, agent):
 
 def check_learnable(cfg: Config) -> None:
     """Raise ValueError where ``cfg`` could not start training (checked before anything is built)."""
+    fleets = [apply_overrides(cfg, [f"drones.num_drones={n}"], where="planner.fleet_sizes")
+              for n in cfg.planner.fleets] or [cfg]
     if LEARNERS[cfg.train.algo] is PPOLearner:
-        rollout_steps(cfg, kit_of(cfg).rows(cfg))  # a rollout must split over the rows of all envs
+        for each in fleets:
+            rollout_steps(each, kit_of(each).rows(each))  # a rollout must split over the rows of all envs
+    if len(fleets) > 1 and cfg.rnd.enabled:
+        raise ValueError(f"planner.fleet_sizes = {cfg.planner.fleet_sizes!r} with rnd.enabled: the novelty network "
+                         "reads a fixed number of drones; train one fleet size, or turn RND off")

@@ -112,3 +112,26 @@ def test_the_learning_curves_note_reads_the_training_episodes_from_the_log():
     assert "success 0" not in note and "time out" not in note
     assert "Training success 1.00 at the first point, 1.00 at the last." in note
     assert training_note(PLANNER, {}) is not None and training_note(FLY_AGENT, scalars) is None
+
+
+@pytest.mark.slow
+def test_a_fleet_planner_trains_on_each_fleet_in_turn_and_flies_another(tmp_path):
+    """planner.fleet_sizes: an env per fleet, each taking an update in turn with the one network; the model then
+    flies a fleet it never trained with."""
+    from roshan.config import load_config
+    from roshan.runs.train import Trainer
+
+    sets = [a for a in TINY if a != "--set"]
+    cfg = load_config(ROOT / "configs/planner.yaml", [*sets, "planner.network=fleet", "planner.fleet_sizes=2,3",
+                                                      "train.max_updates=3"])
+    trainer = Trainer(cfg, tmp_path / "fleet", progress_bar=False)
+    trainer.run()
+    assert [env.num_drones for env, _ in trainer.turns] == [2, 3]
+    assert trainer.env.num_drones == 2  # updates 1 and 3 flew two drones, update 2 three
+    assert trainer.progress.env_steps == 3 * 32  # every update: ppo.horizon decisions, whatever the fleet
+    res = cli("eval", tmp_path / "fleet", "--episodes", 2, "--envs", 2, "--quiet", "--set", "drones.num_drones=5",
+              "--out", tmp_path / "e5")
+    assert res.exit_code == 0, res.output
+    refused = cli("train", ROOT / "configs/planner.yaml", "--root", tmp_path, "--name", "r", *TINY,
+                  "--set", "planner.fleet_sizes=2,3")
+    assert refused.exit_code != 0 and "needs a network that flies any fleet" in refused.output
