@@ -1,5 +1,5 @@
 """Drone physics on the fire simulator's envs (docs/model/agents.md §3-4, §14): motion, boundary, neighbours, collisions
-the water tank and the battery.
+and the water tank. The battery is its own component (:mod:`roshan.kernels.battery`), held as ``battery``.
 
 Drones live on the second axis of every field, ``(E, N)``. Positions and velocities are in metres and m/s
 along (rows, cols); goals and neighbour offsets are in grid units (metres / cell size), as in the reference.
@@ -15,6 +15,7 @@ import taichi as ti
 from roshan.config import DroneConfig
 from roshan.kernels import rng, tasks
 from roshan.kernels.arrays import int32_array
+from roshan.kernels.battery import Battery, NoBattery
 from roshan.kernels.fire import FireSim
 
 BIN = 0.05  # action resolution with use_vel_bins: 41 levels in [-1, 1]
@@ -59,18 +60,9 @@ class DroneSim:
         self.use_water = cfg.use_water_limit
         self.capacity = cfg.water_capacity
         self.refill_rate = cfg.water_capacity * self.dt / (cfg.recharge_time + 1e-4)  # per step at the station
-        # Energy (issue 33): every use sits behind ti.static(self.use_energy), so with the preset "off" the kernels
-        # are the ones of drones that fly forever. Its fields exist either way (zero when built: the pool restores
-        # them by zeroing), so the memory estimate does not depend on the preset.
-        energy = cfg.energy.values()
+        # A battery (issue 33) or none: the rules ask it either way (battery.py), so use_energy is left for what
+        # differs in shape with a battery (the planner observation's energy part, the frames' charge bar).
         self.use_energy = cfg.energy.enabled
-        self.battery = energy.get("capacity", 0.0)
-        self.hover_power = energy.get("hover_power", 0.0)
-        self.speed_power = energy.get("speed_power", 0.0)
-        self.payload_power = energy.get("payload_power", 0.0)
-        self.swap_steps = max(1, round(energy.get("swap_time", 0.0) / self.dt))  # steps landed for a full battery
-        self.queue_energy = self.base_queue_energy()
-        self.turn_energy = self.queue_energy / max(1, self.num_drones - 1)  # one drone's turn on the cell
         # cells: a drone flying home within them of the base's centre is on its final approach (0 = off)
         self.approach = cfg.energy.approach if self.use_energy else 0.0
 
@@ -90,38 +82,20 @@ class DroneSim:
         self.prev_dist = ti.field(ti.f32, (E, N))  # distance to the goal at the previous reward (grid units)
         self.water = ti.field(ti.f32, (E, N))  # drops left in the tank; always full without use_water_limit
         self.refilling = ti.field(ti.i32, (E, N))  # complex policy: flying home because the tank ran empty
-        self.energy = ti.field(ti.f32, (E, N))  # joules left in the battery
-        self.lost = ti.field(ti.i32, (E, N))  # the battery ran empty away from the groundstation: down for the episode
-        self.landed_steps = ti.field(ti.i32, (E, N))  # consecutive steps landed on the groundstation with a battery
-        self.swaps = ti.field(ti.i32, (E, N))  # batteries swapped this episode (returns to the base)
-        self.energy_used = ti.field(ti.f32, (E, N))  # joules drawn this episode
-        self.base_steps = ti.field(ti.i32, (E, N))  # steps spent landed on the groundstation this episode
+        self.battery = Battery(self, cfg.energy) if self.use_energy else NoBattery()  # its fields are its own
         self.water.fill(cfg.water_capacity)
         self._all = np.ones(E, dtype=np.int32)
         self._burning = tasks.BurningCells(fire)  # assign_fire_goals' candidates
 
     @staticmethod
-    def field_bytes(num_envs: int, num_drones: int) -> int:
+    def field_bytes(num_envs: int, num_drones: int, battery: bool = False) -> int:
         """Bytes of the fields (and host arrays) a DroneSim of ``num_envs`` x ``num_drones`` allocates, known before
-        it is built; the water tanks, full once built, once more for the pristine copy of the simulator pool."""
+        it is built, its ``battery``'s included (``drones.energy.enabled``); the water tanks, full once built, once
+        more for the pristine copy of the simulator pool."""
         n = num_drones
-        per_drone = 8 + 8 + 4 + 4 + 8 + 4 + 4 + 4 + 4 + 4 + 4 + 4 + 6 * 4  # pos ... refilling, energy ... base_steps
+        per_drone = 8 + 8 + 4 + 4 + 8 + 4 + 4 + 4 + 4 + 4 + 4 + 4  # pos ... refilling
         per_env = n * per_drone + n * n * (16 + 4) + 8 + 4  # + neighbours, their mask, groundstation, _all
-        return num_envs * (per_env + 4 * n)
-
-    def base_queue_energy(self) -> float:
-        """Joules a drone draws waiting at the groundstation while every other drone is served before it (issue 33):
-        (N - 1) x the time one drone stays on the cell (a swap, or a refill with the water limit, whichever is longer)
-        x the power of flying at v_max along one axis with a full tank (drones jostling beside the cell drew 135 W
-        on average, 147 W at the 90th percentile, with the scenario battery: 145 W by this formula). 0 without a
-        battery."""
-        if not self.use_energy:
-            return 0.0
-        service = self.swap_steps
-        if self.use_water:
-            service = max(service, math.ceil((self.cfg.recharge_time + 1e-4) / self.dt))
-        power = self.hover_power + self.speed_power * self.v_max * self.v_max + self.payload_power
-        return (self.num_drones - 1) * service * self.dt * power
+        return num_envs * (per_env + 4 * n) + (Battery if battery else NoBattery).field_bytes(num_envs, n)
 
     # ------------------------------------------------------------------------------------------ public API
 
@@ -217,23 +191,14 @@ class DroneSim:
             if ti.static(self.use_water):
                 self.water[e, d] = self.capacity
                 self.refilling[e, d] = 0
-            if ti.static(self.use_energy):
-                self.energy[e, d] = self.battery
-                self.lost[e, d] = 0
-                self.landed_steps[e, d] = 0
-                self.swaps[e, d] = 0
-                self.energy_used[e, d] = 0.0
-                self.base_steps[e, d] = 0
+            self.battery.fill(e, d)
 
     @ti.func
     def move_drone(self, e, d, a):
-        """Fly drone d by action a; with a battery, draw its energy, and a lost drone stays where it came down."""
-        if ti.static(self.use_energy):
-            if self.lost[e, d] == 0:
-                self.fly(e, d, a)
-                self.draw_energy(e, d)
-        else:
+        """Fly drone d by action a and draw its battery; a lost drone stays where it came down."""
+        if self.battery.is_lost(e, d) == 0:
             self.fly(e, d, a)
+            self.battery.draw(e, d)
 
     @ti.func
     def fly(self, e, d, a):
@@ -257,46 +222,6 @@ class DroneSim:
             self.refill(e, d)
 
     @ti.func
-    def draw_energy(self, e, d):
-        """On the groundstation cell a drone is landed: it draws nothing, and after ``swap_steps`` steps in a row there
-        with a battery that is not full it gets a full one. Elsewhere it draws P dt with P = hover_power +
-        speed_power |v|^2 + payload_power * fill; a drone whose battery runs empty there is lost: it stops, drops its
-        reserved fire and neither moves nor puts out fires for the rest of the episode."""
-        if self.at_groundstation(e, d) != 0:
-            self.base_steps[e, d] += 1
-            if self.energy[e, d] < self.battery:
-                self.landed_steps[e, d] += 1
-                if self.landed_steps[e, d] >= self.swap_steps:
-                    self.energy[e, d] = self.battery
-                    self.landed_steps[e, d] = 0
-                    self.swaps[e, d] += 1
-        else:
-            self.landed_steps[e, d] = 0
-            v = self.vel[e, d]
-            fill = 1.0  # without the water limit the tank never empties
-            if ti.static(self.use_water):
-                fill = self.water[e, d] / self.capacity
-            drawn = (self.hover_power + self.speed_power * v.dot(v) + self.payload_power * fill) * self.dt
-            self.energy_used[e, d] += ti.min(drawn, self.energy[e, d])
-            self.energy[e, d] -= drawn
-            if self.energy[e, d] <= 0.0:
-                self.energy[e, d] = 0.0
-                self.lost[e, d] = 1
-                self.vel[e, d] = ti.Vector([0.0, 0.0])
-                self.goal_cell[e, d] = -1
-
-    @ti.func
-    def energy_to_groundstation(self, e, d) -> ti.f32:
-        """Joules drone d draws on the quickest flight to the groundstation's centre with a full tank: each axis is
-        clamped to v_max, so the longer one flies at v_max and the other in step with it (no detour counted)."""
-        gap = ti.abs(self.groundstation_centre(e) * self.cell - self.pos[e, d])
-        long_axis = ti.max(gap[0], gap[1])
-        ratio = ti.min(gap[0], gap[1]) / ti.max(long_axis, 1e-6)
-        speed_sq = self.v_max * self.v_max * (1.0 + ratio * ratio)
-        power = self.hover_power + self.speed_power * speed_sq + self.payload_power
-        return power * long_axis / self.v_max
-
-    @ti.func
     def hold_action(self, e, d):
         """The action that keeps drone d where it is: no velocity command, or in acceleration mode the one that brakes
         it (landed at the groundstation, :meth:`roshan.kernels.tasks.GoalRules.is_landed`)."""
@@ -308,7 +233,7 @@ class DroneSim:
     @ti.func
     def is_stocked(self, e, d) -> ti.i32:
         """A full battery, and a full tank with the water limit."""
-        full = ti.cast(self.energy[e, d] >= self.battery, ti.i32)
+        full = self.battery.is_full(e, d)
         if ti.static(self.use_water):
             full = ti.cast(full != 0 and self.water[e, d] >= self.capacity, ti.i32)
         return full
@@ -317,14 +242,6 @@ class DroneSim:
     def at_groundstation(self, e, d) -> ti.i32:
         gs = self.groundstation[e]
         return ti.cast(self.cell_of(e, d) == gs[0] * self.cols + gs[1], ti.i32)
-
-    @ti.func
-    def is_active(self, e, d) -> ti.i32:
-        """1 unless the battery ran empty away from the groundstation."""
-        active = 1
-        if ti.static(self.use_energy):
-            active = 1 - self.lost[e, d]
-        return active
 
     @ti.func
     def refill(self, e, d):
@@ -343,18 +260,15 @@ class DroneSim:
     @ti.func
     def update_neighbours(self, e):
         """docs/model/agents.md §3.3: per drone, the nearest boundary and every other drone within half the view
-        range. With a battery, a drone on the groundstation cell is landed (it draws nothing there): on the ground, it
-        neither sees nor is seen by the others and collides with none (issue 33: three drones landed there kept a
-        fourth, which the collision FlyAgent steered around them, 8-13 m off the cell until its battery ran out).
-        With ``energy.approach`` a drone on its final approach (:meth:`is_approaching`) is down too, and no longer
-        sees the map's edge: on Borkenberge with 16 drones, drones arriving together at a base in the map's corner
-        hovered 1-2 cells off it until their batteries were empty."""
+        range. A drone grounded at the base (:meth:`roshan.kernels.battery.Battery.is_grounded`: with a battery, landed
+        on the groundstation cell) neither sees nor is seen by the others and collides with none. With
+        ``energy.approach`` a drone on its final approach (:meth:`is_approaching`) is down too, and no longer sees the
+        map's edge: on Borkenberge with 16 drones, drones arriving together at a base in the map's corner hovered 1-2
+        cells off it until their batteries were empty."""
         for i in range(self.num_drones):
             x = self.pos[e, i] / self.cell
             b = self.nearest_boundary(x)
-            i_down = 0
-            if ti.static(self.use_energy):
-                i_down = self.is_down(e, i)
+            i_down = self.battery.is_grounded(e, i)
             sees_edge = 1
             if ti.static(self.approach > 0.0):
                 sees_edge = 1 - i_down
@@ -368,9 +282,7 @@ class DroneSim:
             for j in range(self.num_drones):
                 if j != i:
                     dxy = self.pos[e, j] / self.cell - x
-                    airborne = 1  # both in the air
-                    if ti.static(self.use_energy):
-                        airborne = ti.cast(i_down + self.is_down(e, j) == 0, ti.i32)
+                    airborne = ti.cast(i_down + self.battery.is_grounded(e, j) == 0, ti.i32)  # both in the air
                     if airborne != 0 and ti.abs(dxy[0]) < self.half_view and ti.abs(dxy[1]) < self.half_view:
                         vn = self.vel[e, j] / (self.v_max * self.s_norm)
                         self.neighbours[e, i, slot] = ti.Vector([dxy[0] / self.view, dxy[1] / self.view, vn[0], vn[1]])
@@ -500,7 +412,7 @@ class DroneSim:
         c = self.cell_of(e, d)
         last = 0
         self.extinguished[e, d] = 0
-        if c >= 0 and self.is_active(e, d) != 0:
+        if c >= 0 and self.battery.is_lost(e, d) == 0:
             if self.fire.is_burning(e, c) != 0 and self.has_water(e, d) != 0:
                 if ti.static(self.use_water):
                     self.water[e, d] = ti.max(self.water[e, d] - 1.0, 0.0)

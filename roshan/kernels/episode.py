@@ -32,22 +32,13 @@ def write_record(episode: ti.template(), fire: ti.template(), e, success, reason
 
 
 @ti.func
-def write_energy(episode: ti.template(), drones: ti.template(), e):
-    """Env e's battery columns (with ``drones.energy`` only; they stay zero without it)."""
-    if ti.static(drones.use_energy):
-        lost = 0
-        swaps = 0
-        used = 0.0
-        landed = 0
-        for d in range(drones.num_drones):
-            lost += drones.lost[e, d]
-            swaps += drones.swaps[e, d]
-            used += drones.energy_used[e, d]
-            landed += drones.base_steps[e, d]
-        episode[e, EP_LOST] = ti.cast(lost, ti.f32)
-        episode[e, EP_SWAPS] = ti.cast(swaps, ti.f32)
-        episode[e, EP_ENERGY] = used
-        episode[e, EP_BASE_TIME] = ti.cast(landed, ti.f32) * drones.dt / drones.num_drones
+def write_battery(episode: ti.template(), battery: ti.template(), e):
+    """Env e's battery columns (:meth:`roshan.kernels.battery.Battery.totals`; zero without a battery)."""
+    totals = battery.totals(e)
+    episode[e, EP_LOST] = totals[0]
+    episode[e, EP_SWAPS] = totals[1]
+    episode[e, EP_ENERGY] = totals[2]
+    episode[e, EP_BASE_TIME] = totals[3]
 
 
 @ti.data_oriented
@@ -111,6 +102,6 @@ class EpisodeKernels:
     def close_episode(self, episode: ti.template(), dones: ti.template(), e, success, reason, truncated):
         """Write env e's record and done flags: truncated (a pure time-out) or terminated."""
         write_record(episode, self.fire, e, success, reason, self.steps[e], self.ret[e])
-        write_energy(episode, self.drones, e)
+        write_battery(episode, self.drones.battery, e)
         dones[e, 0] = ti.cast(1 - truncated, ti.u8)
         dones[e, 1] = ti.cast(truncated, ti.u8)

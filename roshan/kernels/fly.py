@@ -156,9 +156,8 @@ class FlyKernels(EpisodeKernels):
         if ti.static(self.collision_on):
             if self.drones.collided[e, d] != 0:
                 reason = COLLISION
-        if ti.static(self.drones.use_energy):
-            if self.drones.lost[e, d] != 0:
-                reason = LOST  # its battery ran empty away from the groundstation
+        if self.drones.battery.is_lost(e, d) != 0:
+            reason = LOST  # its battery ran empty away from the groundstation
         if timed_out != 0:
             reason = TIMEOUT
         return reason

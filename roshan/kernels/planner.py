@@ -234,13 +234,9 @@ class PlannerKernels(EpisodeKernels):
         if ti.cast(self.fire.burned_count(e), ti.f32) > self.burnout * self.fire.num_cells:
             terminal = 1
             reason = BURNOUT
-        if ti.static(self.drones.use_energy):
-            lost = 0
-            for d in range(self.drones.num_drones):
-                lost += self.drones.lost[e, d]
-            if lost == self.drones.num_drones:
-                terminal = 1
-                reason = LOST  # every drone came down with an empty battery
+        if self.drones.battery.all_lost(e) != 0:
+            terminal = 1
+            reason = LOST  # every drone came down with an empty battery
         if timed_out != 0:
             terminal = 1
             reason = TIMEOUT
@@ -270,10 +266,8 @@ class PlannerKernels(EpisodeKernels):
             self.prev_water[e, d] = dr.water[e, d]
         r += self.step_terms[e] + planner_step_reward(self.coef, 0.0, 0, self.ext_count[e], 0.0, drop, refilled,
                                                       empty)
-        if ti.static(self.use_energy):
-            lost = 0
-            for d in range(dr.num_drones):
-                lost += dr.lost[e, d]
+        if ti.static(self.use_energy):  # a term of the reward with a battery only (adding 0 would turn -0.0 into 0.0)
+            lost = dr.battery.lost_count(e)
             r += self.coef.lost * (lost - self.prev_lost[e])  # DroneLost, for the drones down in this decision
             self.prev_lost[e] = lost
         rewards[e] = r
@@ -389,9 +383,9 @@ class PlannerKernels(EpisodeKernels):
             if ti.static(self.use_water):
                 w = ti.math.clamp(dr.water[e, d] / dr.capacity, 0.0, 1.0)
             obs[e, self.o_water + d] = w
-            if ti.static(self.use_energy):
-                obs[e, self.o_energy + 2 * d] = ti.math.clamp(dr.energy[e, d] / dr.battery, 0.0, 1.0)
-                home = dr.energy_to_groundstation(e, d) / dr.battery
+            if ti.static(self.use_energy):  # the observation's energy part: only with a battery
+                obs[e, self.o_energy + 2 * d] = dr.battery.charge_fraction(e, d)
+                home = dr.battery.energy_home(e, d) / dr.battery.capacity
                 obs[e, self.o_energy + 2 * d + 1] = ti.math.clamp(home, 0.0, 1.0)
         f0 = self.o_fires
         m0 = self.o_mask

@@ -85,7 +85,7 @@ def fly_estimate(land: LandCoverMap, cfg: Config, num_envs: int) -> Estimate:
     """What :func:`take_fly_sims` would allocate for ``num_envs`` envs (the renderer, made at the first frame,
     aside)."""
     fire_bytes, z = fire_estimate(land, cfg, num_envs)
-    drones = DroneSim.field_bytes(num_envs, cfg.drones.num_drones)
+    drones = DroneSim.field_bytes(num_envs, cfg.drones.num_drones, cfg.drones.energy.enabled)
     return Estimate(fire_bytes + drones + EpisodeKernels.field_bytes(num_envs), z)
 
 
@@ -94,8 +94,8 @@ def planner_estimate(land: LandCoverMap, cfg: Config, pc: PlannerConfig, num_env
     fire_bytes, z = fire_estimate(land, cfg, num_envs)
     k = pc.max_candidates or land.rows * land.cols + 1
     max_len = meander_length(land.rows, land.cols, pc.num_explorers, pc.explorer_view_range, pc.meander)
-    total = (fire_bytes + DroneSim.field_bytes(num_envs, cfg.drones.num_drones)
-             + DroneSim.field_bytes(num_envs, pc.num_explorers)
+    total = (fire_bytes + DroneSim.field_bytes(num_envs, cfg.drones.num_drones, cfg.drones.energy.enabled)
+             + DroneSim.field_bytes(num_envs, pc.num_explorers)  # the explorers fly without a battery
              + ExploreMaps.field_bytes(num_envs, land.rows, land.cols, pc.num_explorers, max_len)
              + PlannerKernels.field_bytes(num_envs, cfg.drones.num_drones, k))
     return Estimate(total, z, (f"a smaller planner.max_candidates (now {k:,} per env)",))
@@ -254,10 +254,11 @@ def pooled_count() -> int:
 
 
 def _simulators(sims: FlySims | PlannerSims) -> list[object]:
-    """The objects whose fields and attributes make a bundle's state. The viewer is left out: its fields are
-    allocated at the first render and repainted whole by every render."""
-    return [v for v in vars(sims).values() if isinstance(v, (FireSim, DroneSim, ExploreMaps, FlyKernels,
-                                                             PlannerKernels))]
+    """The objects whose fields and attributes make a bundle's state, each drone group's battery included. The
+    viewer is left out: its fields are allocated at the first render and repainted whole by every render."""
+    objects = [v for v in vars(sims).values() if isinstance(v, (FireSim, DroneSim, ExploreMaps, FlyKernels,
+                                                                PlannerKernels))]
+    return objects + [v.battery for v in objects if isinstance(v, DroneSim)]
 
 
 def _fields_of(objects: list[object]) -> tuple:

@@ -517,7 +517,7 @@ class DroneOverlay:
             c0 = ti.floor(c[1] - radius - 1.0, ti.i32)
             row = ti.floor(c[0] + radius + 2.0, ti.i32)
             if ti.static(dr.use_energy):
-                fill = ti.math.clamp(dr.energy[env, d] / dr.battery, 0.0, 1.0)
+                fill = dr.battery.charge_fraction(env, d)
                 _fill_rect(image, row, row + height, c0, c0 + width, rim)
                 _fill_rect(image, row, row + height, c0, c0 + ti.round(fill * width, ti.i32),
                            ti.Vector(BATTERY_COLOUR, ti.u8))

@@ -144,7 +144,7 @@ class GoalRules:
             map), or None.
         resources: with a battery (``drones.energy``), the resource-aware heuristic: a drone flies home once its
             battery holds no more than (1 + ``energy_margin``) times what flying home takes plus what waiting there
-            for every other drone's turn takes (:meth:`roshan.kernels.drones.DroneSim.base_queue_energy`), or its
+            for every other drone's turn takes (:meth:`roshan.kernels.battery.Battery.base_queue_energy`), or its
             tank is empty, waits there until both are full, and then takes the nearest free fire (``DROP_ANYWHERE``:
             it waits there for the planner's next goal).
         queue: the reserve for the queue at the base (``planner.return_queue``): every other drone's turn
@@ -190,10 +190,7 @@ class GoalRules:
         if ti.static(self.has_sensor):
             self.sensor.observe_drone(e, self.drones, d)
         last = 0
-        if ti.static(self.drones.use_energy):
-            if self.drones.lost[e, d] == 0:  # a lost drone follows no goal rule
-                last = self.handle_goal(e, d)
-        else:
+        if self.drones.battery.is_lost(e, d) == 0:  # a lost drone follows no goal rule
             last = self.handle_goal(e, d)
         return last
 
@@ -240,15 +237,15 @@ class GoalRules:
         the drones flying home or waiting there now (an env's drones step one after another, so the count is the
         same at any thread count), or none."""
         dr = self.drones
-        reserve = dr.queue_energy
+        reserve = dr.battery.queue_energy
         if ti.static(self.queue == "none"):
             reserve = 0.0
         if ti.static(self.queue == "waiting"):
             ahead = 0
             for o in range(dr.num_drones):
-                if o != d and dr.refilling[e, o] != 0 and dr.lost[e, o] == 0:
+                if o != d and dr.refilling[e, o] != 0 and dr.battery.is_lost(e, o) == 0:
                     ahead += 1
-            reserve = ahead * dr.turn_energy
+            reserve = ahead * dr.battery.turn_energy
         return reserve
 
     @ti.func
@@ -262,9 +259,8 @@ class GoalRules:
             if ti.static(self.mode != DROP_ANYWHERE):  # a planner drone waits there for its next goal
                 self.retarget(e, d)
         elif home == 0:
-            need = (1.0 + self.energy_margin) * dr.energy_to_groundstation(e, d) + self.queue_reserve(e, d)
-            low = dr.energy[e, d] <= need
-            if low or dr.has_water(e, d) == 0:
+            need = (1.0 + self.energy_margin) * dr.battery.energy_home(e, d) + self.queue_reserve(e, d)
+            if dr.battery.is_low(e, d, need) != 0 or dr.has_water(e, d) == 0:
                 dr.refilling[e, d] = 1
                 home = 1
                 take_cell(dr, e, d, -1)  # its fire is free for the others

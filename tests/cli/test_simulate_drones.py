@@ -150,7 +150,7 @@ def test_with_a_battery_and_a_tank_each_drone_carries_its_charge_and_fill_as_bar
     env.reset(seed=2)
     env.drones.set_state(np.array([[[95.0, 152.5]]]), np.zeros((1, 1, 2)))
     battery = cfg.drones.energy.values()["capacity"]
-    env.drones.energy.from_numpy(np.full((1, 1), battery / 2, np.float32))  # half charged
+    env.drones.battery.charge.from_numpy(np.full((1, 1), battery / 2, np.float32))  # half charged
     env.drones.water.from_numpy(np.full((1, 1), cfg.drones.water_capacity / 4, np.float32))  # a quarter full
     renderer = FrameRenderer(env.fire, cell_px=10, backend="raster", particles=False, wind_arrow=False)
     img = renderer.render(overlay=drone_overlay(env.drones))

@@ -115,8 +115,9 @@ def test_the_resource_aware_greedy_loses_no_drone_in_the_endurance_setting():
         _, _, terms, truncs, info = env.step(actions)
         ended = terms | truncs
         assert float(info["episode_energy"]["drones_lost"][ended].sum()) == 0.0
-    assert int(env.drones.lost.to_numpy().sum()) == 0
-    assert int(env.drones.swaps.to_numpy().min(axis=1).min()) >= 1  # every env swapped batteries: the rule was used
+    battery = env.drones.battery
+    assert int(battery.lost.to_numpy().sum()) == 0
+    assert int(battery.swaps.to_numpy().min(axis=1).min()) >= 1  # every env swapped batteries: the rule was used
     env.close()
 
 
@@ -133,7 +134,7 @@ def planner_env(energy: EnergyConfig, resources: bool = False, queue: str = "all
 
 def home_fraction(env: PlannerVectorEnv, battery: float) -> np.ndarray:
     """(E, N) energy of each drone's quickest flight home over a full battery, computed here from the positions
-    (kernels/drones.py energy_to_groundstation, with the scenario's powers and a full tank)."""
+    (kernels/battery.py Battery.energy_home, with the scenario's powers and a full tank)."""
     dr, values = env.drones, env.config.drones.energy.values()
     centre = (dr.groundstation.to_numpy()[:, None, :] + 0.5) * dr.cell
     gap = np.abs(centre - dr.pos.to_numpy())
@@ -152,7 +153,7 @@ def test_the_planner_observes_each_drones_charge_and_the_charge_its_flight_home_
     for _ in range(12):  # every drone flies to the first listed fire
         obs, *_ = env.step(torch.ones((2, 3), dtype=torch.long))
     battery = env.config.drones.energy.values()["capacity"]
-    charge = env.drones.energy.to_numpy() / battery
+    charge = env.drones.battery.charge.to_numpy() / battery
     assert float(charge.max()) < 1.0  # they flew: the batteries drained
     np.testing.assert_allclose(obs["energy"][..., 0].numpy(), charge, rtol=1e-6)
     home = home_fraction(env, battery)
@@ -205,7 +206,7 @@ def test_planner_drones_sent_home_together_land_there_and_get_their_swap():
             landed_at.setdefault((e, d), pos[e, d].copy())
             np.testing.assert_array_equal(pos[e, d], landed_at[(e, d)])  # landed: it stays where it came down
     assert len(landed_at) == 6  # every drone of both envs reached the cell
-    assert int(dr.lost.to_numpy().sum()) == 0 and int(dr.swaps.to_numpy().min()) >= 1
+    assert int(dr.battery.lost.to_numpy().sum()) == 0 and int(dr.battery.swaps.to_numpy().min()) >= 1
     env.close()
 
 
@@ -230,8 +231,8 @@ def test_planner_drones_with_the_resource_rule_go_home_by_themselves_and_stay_un
         lost += float(info["episode_energy"]["drones_lost"][ended].sum())
         waiting = dr.refilling.to_numpy() != 0
         np.testing.assert_array_equal(dr.goal.to_numpy()[waiting], np.broadcast_to(centre, (2, 3, 2))[waiting])
-    assert lost == 0.0 and int(dr.lost.to_numpy().sum()) == 0
-    assert int(dr.swaps.to_numpy().min()) >= 1  # every drone went home and got a swap
+    assert lost == 0.0 and int(dr.battery.lost.to_numpy().sum()) == 0
+    assert int(dr.battery.swaps.to_numpy().min()) >= 1  # every drone went home and got a swap
     env.close()
 
 
@@ -250,8 +251,8 @@ def test_the_waiting_queue_reserve_counts_only_the_drones_restocking_now():
             lost += float(info["episode_energy"]["drones_lost"][terms | truncs].sum())
             if queue not in first_return and dr.refilling.to_numpy().any():
                 first_return[queue] = step
-        assert lost == 0.0 and int(dr.lost.to_numpy().sum()) == 0, queue
-        assert int(dr.swaps.to_numpy().min()) >= 1, queue
+        assert lost == 0.0 and int(dr.battery.lost.to_numpy().sum()) == 0, queue
+        assert int(dr.battery.swaps.to_numpy().min()) >= 1, queue
         env.close()
     assert first_return["none"] >= first_return["waiting"] > first_return["all"]
 
@@ -271,8 +272,8 @@ def test_drones_landed_at_the_groundstation_do_not_keep_another_off_it():
         _, _, terms, truncs, info = env.step(actions)
         ended = terms | truncs
         assert float(info["episode_energy"]["drones_lost"][ended].sum()) == 0.0
-    assert int(env.drones.lost.to_numpy().sum()) == 0
-    assert int(env.drones.swaps.to_numpy()[:, 3].min()) >= 1  # drone 3 came back and swapped in both envs
+    assert int(env.drones.battery.lost.to_numpy().sum()) == 0
+    assert int(env.drones.battery.swaps.to_numpy()[:, 3].min()) >= 1  # drone 3 came back and swapped in both envs
     env.close()
 
 

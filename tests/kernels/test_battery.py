@@ -12,6 +12,7 @@ import taichi as ti
 
 from roshan.config import ConfigError, DroneConfig, EnergyConfig, IgnitionConfig
 from roshan.config.schema import from_dict
+from roshan.kernels.battery import Battery, NoBattery
 from roshan.kernels.drones import DroneSim
 from roshan.kernels.fire import FireSim
 from roshan.maps import load_map
@@ -75,9 +76,9 @@ def test_energy_drawn_over_a_known_flight_is_the_power_law_integrated():
     fly(d, (0.3, -0.4), 20)  # (3, -4) m/s, |v|^2 = 25 again
     fly(d, (1.0, 1.0), 30)  # |v|^2 = 200: P = 100 + 50 + 20 = 170 W
     expected = (60 * 126.25 + 30 * 170.0) * DT
-    assert scalar(d.energy_used) == pytest.approx(expected, rel=1e-5)
-    assert scalar(d.energy) == pytest.approx(15000.0 - expected, rel=1e-5)
-    assert scalar(d.lost) == 0
+    assert scalar(d.battery.used) == pytest.approx(expected, rel=1e-5)
+    assert scalar(d.battery.charge) == pytest.approx(15000.0 - expected, rel=1e-5)
+    assert scalar(d.battery.lost) == 0
 
 
 def test_payload_power_follows_the_tanks_fill():
@@ -85,17 +86,17 @@ def test_payload_power_follows_the_tanks_fill():
     put(d, AWAY)
     d.set_water(np.array([[1.0]], np.float32))  # a quarter full: P = 100 + 0 + 20 / 4 = 105 W at rest
     fly(d, (0.0, 0.0), 10)
-    assert scalar(d.energy_used) == pytest.approx(10 * 105.0 * DT, rel=1e-5)
+    assert scalar(d.battery.used) == pytest.approx(10 * 105.0 * DT, rel=1e-5)
 
 
 def test_a_drone_whose_battery_runs_empty_away_from_the_base_is_lost_and_does_nothing_more():
     d = make(capacity=50.0, payload_power=0.0)  # 100 W at rest: empty after 5 steps
     put(d, AWAY)
     fly(d, (0.0, 0.0), 4)
-    assert scalar(d.lost) == 0 and scalar(d.energy) == pytest.approx(10.0, rel=1e-5)
+    assert scalar(d.battery.lost) == 0 and scalar(d.battery.charge) == pytest.approx(10.0, rel=1e-5)
     fly(d, (0.0, 0.0), 1)
-    assert scalar(d.lost) == 1 and scalar(d.energy) == 0.0
-    assert scalar(d.energy_used) == pytest.approx(50.0, rel=1e-5)  # never more than the battery held
+    assert scalar(d.battery.lost) == 1 and scalar(d.battery.charge) == 0.0
+    assert scalar(d.battery.used) == pytest.approx(50.0, rel=1e-5)  # never more than the battery held
     fly(d, (1.0, 1.0), 10)
     np.testing.assert_array_equal(d.pos.to_numpy()[0, 0], AWAY)  # it came down where it was
     np.testing.assert_array_equal(d.vel.to_numpy()[0, 0], [0.0, 0.0])
@@ -106,7 +107,7 @@ def test_a_drone_whose_battery_runs_empty_away_from_the_base_is_lost_and_does_no
     assert d.fire.stats()["burning"][0] == 1
     assert extinguish(d) == 0 and d.fire.stats()["burning"][0] == 1  # a lost drone puts nothing out
     d.reset()  # the next episode starts with a full battery
-    assert scalar(d.lost) == 0 and scalar(d.energy) == 50.0 and scalar(d.energy_used) == 0.0
+    assert scalar(d.battery.lost) == 0 and scalar(d.battery.charge) == 50.0 and scalar(d.battery.used) == 0.0
 
 
 def test_the_same_drone_with_battery_left_puts_the_fire_out():
@@ -121,7 +122,7 @@ def test_the_same_drone_with_battery_left_puts_the_fire_out():
 
 @ti.kernel
 def energy_home(drones: ti.template()) -> ti.f32:
-    return drones.energy_to_groundstation(0, 0)
+    return drones.battery.energy_home(0, 0)
 
 
 def test_the_energy_of_the_flight_home_is_the_quickest_flights():
@@ -138,7 +139,8 @@ def test_the_reserve_for_a_queue_at_the_base_is_every_other_drones_turn_there():
     fire = FireSim(load_map("35x36_Woods"), ignition=IgnitionConfig(fire_percentage=0.0), num_envs=1, seed=0)
 
     def reserve(drones, preset="scenario", **cfg):
-        return DroneSim(fire, DroneConfig(num_drones=drones, energy=EnergyConfig(preset=preset), **cfg)).queue_energy
+        sim = DroneSim(fire, DroneConfig(num_drones=drones, energy=EnergyConfig(preset=preset), **cfg))
+        return sim.battery.queue_energy
 
     # 3 others x the 3 s swap x 145 W (100 hover + 0.25 x 10^2 at v_max + 20 with a full tank)
     assert reserve(4) == pytest.approx(3 * 3.0 * 145.0)
@@ -148,23 +150,36 @@ def test_the_reserve_for_a_queue_at_the_base_is_every_other_drones_turn_there():
     # 16 drones with the realistic battery: fifteen 120 s swaps at full power are more than a full battery, so with
     # every other drone's turn in reserve each drone would turn home as it left (planner.return_queue: waiting)
     big = DroneSim(fire, DroneConfig(num_drones=16, energy=EnergyConfig(preset="realistic")))
-    assert big.queue_energy > big.battery and big.turn_energy == pytest.approx(big.queue_energy / 15)
+    b = big.battery
+    assert b.queue_energy > b.capacity and b.turn_energy == pytest.approx(b.queue_energy / 15)
+
+
+def test_the_memory_estimate_counts_the_batterys_fields_only_where_there_is_one():
+    """A drone that flies forever carries a NoBattery, which holds no field: the estimate adds a battery's six
+    values per drone with drones.energy only."""
+    d = make(envs=2)
+    fields = [v for v in vars(d.battery).values() if isinstance(v, ti.Field)]
+    assert len(fields) == 6 and Battery.field_bytes(2, 1) == sum(4 * int(np.prod(f.shape)) for f in fields)
+    plain = DroneSim(d.fire, DroneConfig(num_drones=1))
+    assert isinstance(plain.battery, NoBattery) and vars(plain.battery) == {}
+    assert DroneSim.field_bytes(2, 1, battery=True) - DroneSim.field_bytes(2, 1) == Battery.field_bytes(2, 1)
 
 
 def test_a_swap_on_the_groundstation_restores_the_battery_after_the_set_time():
     d = make(swap_time=2.0)  # 20 steps landed
+    b = d.battery
     put(d, AWAY)
     fly(d, (0.0, 0.0), 10)
-    left = scalar(d.energy)
+    left = scalar(b.charge)
     assert left < 15000.0
     gs = d.groundstation.to_numpy()[0]
     put(d, tuple((gs + 0.5) * d.cell))
     fly(d, (0.0, 0.0), 19)
-    assert scalar(d.energy) == left and scalar(d.swaps) == 0  # landed: nothing drawn, the swap not done yet
+    assert scalar(b.charge) == left and scalar(b.swaps) == 0  # landed: nothing drawn, the swap not done yet
     fly(d, (0.0, 0.0), 1)
-    assert scalar(d.energy) == 15000.0 and scalar(d.swaps) == 1
+    assert scalar(b.charge) == 15000.0 and scalar(b.swaps) == 1
     fly(d, (0.0, 0.0), 40)  # a full battery on the base is not swapped again
-    assert scalar(d.energy) == 15000.0 and scalar(d.swaps) == 1 and scalar(d.base_steps) == 60
+    assert scalar(b.charge) == 15000.0 and scalar(b.swaps) == 1 and scalar(b.base_steps) == 60
 
 
 def test_leaving_the_base_before_the_swap_is_done_restarts_it():
@@ -179,9 +194,9 @@ def test_leaving_the_base_before_the_swap_is_done_restarts_it():
     fly(d, (0.0, 0.0), 1)
     put(d, base)
     fly(d, (0.0, 0.0), 19)
-    assert scalar(d.swaps) == 0
+    assert scalar(d.battery.swaps) == 0
     fly(d, (0.0, 0.0), 1)
-    assert scalar(d.swaps) == 1
+    assert scalar(d.battery.swaps) == 1
 
 
 SCRIPT = textwrap.dedent("""
@@ -202,9 +217,9 @@ SCRIPT = textwrap.dedent("""
     for t in range(300):
         d.move(rng.uniform(-1, 1, (8, 4, 2)).astype(np.float32))
         if t % 50 == 49:
-            for f in (d.pos, d.energy, d.lost, d.swaps, d.energy_used):
+            for f in (d.pos, d.battery.charge, d.battery.lost, d.battery.swaps, d.battery.used):
                 h.update(f.to_numpy().tobytes())
-    print(int(d.lost.to_numpy().sum()), h.hexdigest())
+    print(int(d.battery.lost.to_numpy().sum()), h.hexdigest())
 """)
 
 
@@ -260,6 +275,6 @@ def test_the_final_approach_flies_straight_onto_the_groundstation_cell_and_lands
     put(drones, tuple(centre + inward * drones.cell))
     fly_final_approach(drones, int(np.ceil(drones.cell / (drones.v_max * DT))) + 1)
     np.testing.assert_allclose(drones.pos.to_numpy()[0, 0], centre, atol=1e-3)
-    battery = scalar(drones.energy)
+    battery = scalar(drones.battery.charge)
     fly_final_approach(drones, 10)
-    assert scalar(drones.energy) == battery  # on the cell: landed, nothing drawn
+    assert scalar(drones.battery.charge) == battery  # on the cell: landed, nothing drawn
