@@ -242,3 +242,50 @@ class NoBattery:
     @ti.func
     def totals(self, e):
         return ti.Vector([0.0, 0.0, 0.0, 0.0])
+
+
+@ti.data_oriented
+class FinalApproach:
+    """The last metres of a flight home (``drones.energy.approach`` cells; with a battery only): a drone flying home
+    (``refilling``) that close to the groundstation's centre flies straight in instead of following its FlyAgent, and
+    counts as down, like a landed drone: it neither sees nor is seen by the others, nor the map's edge (on Borkenberge
+    with 16 drones, drones arriving together at a base in the map's corner hovered 1-2 cells off it until their
+    batteries were empty)."""
+
+    def __init__(self, drones, cells: float):
+        self.drones, self.cells = drones, cells
+
+    @ti.func
+    def is_approaching(self, e, d) -> ti.i32:
+        dr = self.drones
+        near = 0
+        if dr.refilling[e, d] != 0:
+            gap = dr.pos[e, d] / dr.cell - dr.groundstation_centre(e)
+            near = ti.cast(gap.dot(gap) <= self.cells * self.cells, ti.i32)
+        return near
+
+    @ti.func
+    def down(self, e, d, landed) -> ti.i32:
+        """Down at the base: ``landed`` on its cell, or on the final approach."""
+        return ti.max(landed, self.is_approaching(e, d))
+
+    @ti.func
+    def sees_edge(self, down) -> ti.i32:
+        return 1 - down
+
+
+@ti.data_oriented
+class NoApproach:
+    """No final approach: a drone flies home by its FlyAgent to the last metre, and is down only once landed."""
+
+    @ti.func
+    def is_approaching(self, e, d) -> ti.i32:
+        return 0
+
+    @ti.func
+    def down(self, e, d, landed) -> ti.i32:
+        return landed
+
+    @ti.func
+    def sees_edge(self, down) -> ti.i32:
+        return 1

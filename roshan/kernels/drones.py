@@ -15,7 +15,7 @@ import taichi as ti
 from roshan.config import DroneConfig
 from roshan.kernels import rng, tasks
 from roshan.kernels.arrays import int32_array
-from roshan.kernels.battery import Battery, NoBattery
+from roshan.kernels.battery import Battery, FinalApproach, NoApproach, NoBattery
 from roshan.kernels.fire import FireSim
 
 BIN = 0.05  # action resolution with use_vel_bins: 41 levels in [-1, 1]
@@ -83,6 +83,8 @@ class DroneSim:
         self.water = ti.field(ti.f32, (E, N))  # drops left in the tank; always full without use_water_limit
         self.refilling = ti.field(ti.i32, (E, N))  # complex policy: flying home because the tank ran empty
         self.battery = Battery(self, cfg.energy) if self.use_energy else NoBattery()  # its fields are its own
+        # the last metres of a flight home, straight in (energy.approach cells; with a battery only)
+        self.landing = FinalApproach(self, self.approach) if self.approach > 0.0 else NoApproach()
         self.water.fill(cfg.water_capacity)
         self._all = np.ones(E, dtype=np.int32)
         self._burning = tasks.BurningCells(fire)  # assign_fire_goals' candidates
@@ -261,18 +263,15 @@ class DroneSim:
     def update_neighbours(self, e):
         """docs/model/agents.md §3.3: per drone, the nearest boundary and every other drone within half the view
         range. A drone grounded at the base (:meth:`roshan.kernels.battery.Battery.is_grounded`: with a battery, landed
-        on the groundstation cell) neither sees nor is seen by the others and collides with none. With
-        ``energy.approach`` a drone on its final approach (:meth:`is_approaching`) is down too, and no longer sees the
-        map's edge: on Borkenberge with 16 drones, drones arriving together at a base in the map's corner hovered 1-2
-        cells off it until their batteries were empty."""
+        on the groundstation cell) neither sees nor is seen by the others and collides with none. A drone on its
+        final approach (:class:`~roshan.kernels.battery.FinalApproach`) is down too, and no longer sees the map's
+        edge."""
         for i in range(self.num_drones):
             x = self.pos[e, i] / self.cell
             b = self.nearest_boundary(x)
             i_down = self.battery.is_grounded(e, i)
-            sees_edge = 1
-            if ti.static(self.approach > 0.0):
-                sees_edge = 1 - i_down
-            if sees_edge != 0 and ti.abs(b[0]) <= self.half_view and ti.abs(b[1]) <= self.half_view:
+            near_edge = ti.abs(b[0]) <= self.half_view and ti.abs(b[1]) <= self.half_view
+            if self.landing.sees_edge(i_down) != 0 and near_edge:
                 self.neighbours[e, i, 0] = ti.Vector([b[0] / self.half_view, b[1] / self.half_view, 0.0, 0.0])
                 self.neighbour_mask[e, i, 0] = 1
             else:
@@ -315,27 +314,14 @@ class DroneSim:
     # ------------------------------------------------------------------------------------------ goals
 
     @ti.func
-    def is_approaching(self, e, d) -> ti.i32:
-        """Flying home (``refilling``) within ``approach`` cells of the groundstation's centre (``approach`` > 0)."""
-        near = 0
-        if ti.static(self.approach > 0.0):
-            if self.refilling[e, d] != 0:
-                gap = self.pos[e, d] / self.cell - self.groundstation_centre(e)
-                near = ti.cast(gap.dot(gap) <= self.approach * self.approach, ti.i32)
-        return near
-
-    @ti.func
     def is_down(self, e, d) -> ti.i32:
         """Landed on the groundstation cell, or on its final approach: out of the other drones' way."""
-        down = self.at_groundstation(e, d)
-        if ti.static(self.approach > 0.0):
-            down = ti.max(down, self.is_approaching(e, d))
-        return down
+        return self.landing.down(e, d, self.at_groundstation(e, d))
 
     @ti.func
-    def approach_action(self, e, d):
+    def straight_to_base(self, e, d):
         """The velocity command that flies drone d straight to the groundstation's centre, as fast as allowed and
-        no further (the final approach, ``approach``; in acceleration mode the command that brakes towards it)."""
+        no further (the final approach; in acceleration mode the command that brakes towards it)."""
         want = ti.math.clamp((self.groundstation_centre(e) * self.cell - self.pos[e, d]) / self.dt,
                              -self.v_max, self.v_max)
         a = want / self.v_max

@@ -183,9 +183,8 @@ class GoalRules:
         if ti.static(self.land):
             if self.is_landed(e, d) != 0:
                 a = self.drones.hold_action(e, d)
-            elif ti.static(self.drones.approach > 0.0):
-                if self.drones.is_approaching(e, d) != 0:  # the last metres straight in, not by the FlyAgent
-                    a = self.drones.approach_action(e, d)
+            elif self.drones.landing.is_approaching(e, d) != 0:  # the last metres straight in, not by the FlyAgent
+                a = self.drones.straight_to_base(e, d)
         self.drones.move_drone(e, d, a)
         if ti.static(self.has_sensor):
             self.sensor.observe_drone(e, self.drones, d)

@@ -263,7 +263,7 @@ def fly_final_approach(drones: ti.template(), steps: ti.i32):
     """Drone 0 of env 0 flies ``steps`` steps by the final-approach command (GoalRules.drone_step's choice)."""
     for _ in range(1):
         for _k in range(steps):
-            drones.move_drone(0, 0, drones.approach_action(0, 0))
+            drones.move_drone(0, 0, drones.straight_to_base(0, 0))
 
 
 def test_the_final_approach_flies_straight_onto_the_groundstation_cell_and_lands():
