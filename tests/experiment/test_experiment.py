@@ -211,17 +211,21 @@ def test_the_low_level_model_enters_a_runs_fingerprint_by_its_contents(tmp_path,
         fh.write(b"\0")  # another file under the same name
     assert greedy.models()["planner.fly_model"][1] != digest and greedy.fingerprint() != before
 
-    plain = load_spec(REPO / "configs" / "experiments" / "thesis.yaml")
-    row = plain.runs(("greedy",))[0]
+    stable = load_spec(REPO / "configs" / "experiments" / "planner_stable_flier.yaml")  # flies models/fly_collision
+    row = stable.runs(("greedy",))[0]
     stored = row.fingerprint()
     monkeypatch.setitem(spec_module.MODELS_OF_RECORD, "models/fly_collision", "0" * 16)  # as if the file changed
     assert row.fingerprint() != stored
-    assert plain.runs(("E1_ppo",))[0].models() == {}  # a FlyAgent that trains loads no model
-    assert set(plain.runs(("E7",))[0].models()) == {"buffer.model"}
+    thesis = load_spec(REPO / "configs" / "experiments" / "thesis.yaml")
+    assert thesis.runs(("E1_ppo",))[0].models() == {}  # a FlyAgent that trains loads no model
+    flier = thesis.runs(("greedy",))[0].models()["planner.fly_model"]  # the thesis's rows fly its E6-grade agent
+    assert flier == ("models/fly_collision_thesis", spec_module.model_digest("models/fly_collision_thesis",
+                                                                             "planner.fly_model"))
+    assert set(thesis.runs(("E7",))[0].models()) == {"buffer.model"}
     # per_seed.csv's low_level column: the digest the result recorded, '?' where it recorded none
     assert low_level(row, {"models": {"planner.fly_model": {"setting": "models/fly_collision",
                                                             "digest": "ab" * 8}}}) == "ab" * 8
-    assert low_level(row, {}) == "?" and low_level(plain.runs(("E1_ppo",))[0], {}) == ""
+    assert low_level(row, {}) == "?" and low_level(thesis.runs(("E1_ppo",))[0], {}) == ""
 
 
 # ------------------------------------------------------------------------------------------ running (fakes)
