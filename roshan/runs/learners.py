@@ -19,6 +19,7 @@ from roshan.config import Config, apply_overrides
 from roshan.env.fly import FlyVectorEnv
 from roshan.episode import EPISODE_FIELDS
 from roshan.runs.collect import RolloutCollector, ended_rows, next_observation, rollout_steps
+from roshan.runs.envs import make_env
 from roshan.runs.levels import kit_of
 
 
@@ -143,11 +144,26 @@ def make_learner(cfg: Config, env, agent):
 
 def check_learnable(cfg: Config) -> None:
     """Raise ValueError where ``cfg`` could not start training (checked before anything is built)."""
-    fleets = [apply_overrides(cfg, [f"drones.num_drones={n}"], where="planner.fleet_sizes")
-              for n in cfg.planner.fleets] or [cfg]
+    fleets = fleet_configs(cfg)
     if LEARNERS[cfg.train.algo] is PPOLearner:
         for each in fleets:
             rollout_steps(each, kit_of(each).rows(each))  # a rollout must split over the rows of all envs
     if len(fleets) > 1 and cfg.rnd.enabled:
         raise ValueError(f"planner.fleet_sizes = {cfg.planner.fleet_sizes!r} with rnd.enabled: the novelty network "
                          "reads a fixed number of drones; train one fleet size, or turn RND off")
+
+
+def fleet_configs(cfg: Config) -> list[Config]:
+    """The settings a run trains on in turn, an update each: one per fleet of ``planner.fleet_sizes``, else the run's
+    own."""
+    return [apply_overrides(cfg, [f"drones.num_drones={n}"], where="planner.fleet_sizes")
+            for n in cfg.planner.fleets] or [cfg]
+
+
+def fleet_turns(cfg: Config, agent, seed: int) -> list[tuple]:
+    """(env, learner) of each setting of :func:`fleet_configs`, the i-th env seeded ``seed + 104729 i``."""
+    turns = []
+    for i, each in enumerate(fleet_configs(cfg)):
+        env = make_env(each, each.sim.envs, seed=seed + 104_729 * i)
+        turns.append((env, make_learner(each, env, agent)))
+    return turns

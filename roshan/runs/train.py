@@ -32,13 +32,13 @@ from roshan.checkpoints import (
     run_lock,
     save_checkpoint,
 )
-from roshan.config import Config, apply_overrides, dump_config
+from roshan.config import Config, dump_config
 from roshan.io import OutputError, prepare_output, progress_bar, writing
 from roshan.runs.budget import budget_total
 from roshan.runs.envs import make_env
 from roshan.runs.episode_log import EpisodeLog
 from roshan.runs.evaluate import evaluate_run, run_episodes
-from roshan.runs.learners import check_learnable, make_learner
+from roshan.runs.learners import check_learnable, fleet_turns
 from roshan.runs.report.stats import evaluation_scalars, summarize
 from roshan.runs.resume import resume_config, resume_state  # noqa: F401  (resume_config: cli's name)
 from roshan.runs.tboard import EpisodeFrames, add_config, add_hparams, add_video, log_episodes, log_update
@@ -87,23 +87,14 @@ class Trainer:
             self.saved_update = self.progress.updates
         elif tc.init_from:
             self._init_weights(tc.init_from)
-        # A resumed run starts fresh episodes from a seed that depends on where it stopped.
-        seed = cfg.sim.seed + 7919 * self.progress.updates
-        # planner.fleet_sizes: an env and learner per fleet, each taking its turn for an update; else one
-        self.turns = [self._fleet(n, seed + 104_729 * i) for i, n in enumerate(cfg.planner.fleets)] or \
-            [self._fleet(None, seed)]
+        # A resumed run starts fresh episodes from a seed that depends on where it stopped. An env and a learner per
+        # fleet of planner.fleet_sizes, each taking its turn for an update; else one.
+        self.turns = fleet_turns(cfg, self.agent, seed=cfg.sim.seed + 7919 * self.progress.updates)
         self.env, self.learner = self.turns[self.progress.updates % len(self.turns)]
         self.eval_env = None
         self.last_eval: dict | None = None  # the summary of the last periodic evaluation
         self.stopped_by: str | None = None  # the budget that ended the run (stop_reason)
         self.writer = self._open_writer(resumed=resume_state is not None)
-
-    def _fleet(self, num_drones: int | None, seed: int) -> tuple:
-        """(env, learner) of the run's setting with ``num_drones`` drones (None: the config's own)."""
-        cfg = self.cfg if num_drones is None else apply_overrides(self.cfg, [f"drones.num_drones={num_drones}"],
-                                                                   where="planner.fleet_sizes")
-        env = make_env(cfg, cfg.sim.envs, seed=seed)
-        return env, make_learner(cfg, env, self.agent)
 
     @property
     def log_step(self) -> int:
