@@ -11,7 +11,6 @@ import hashlib
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 import torch
 
@@ -19,6 +18,7 @@ from roshan.config import Config, DroneConfig, EnergyConfig, FlyConfig, Ignition
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.planner import PlannerVectorEnv
 from roshan.kernels.render import EnvZeroFrames
+from tests.test_behaviour_hashes import feed
 
 ROOT = Path(__file__).resolve().parents[1]
 FLIER = ROOT / "tests" / "data" / "fly_collision_v1"  # not the shipped model: a new one must not change the pins
@@ -30,17 +30,6 @@ EXPECTED = {
     "greedy_aware_all": "51dc513fd290db3bc6833b3d4ee85e97d259823cc51cefc34eec59bf2b2f45ae",
     "greedy_aware_none": "df0b7bad69a71b2bff4517e7c21dbdbaea9e365cf25ed62a4502fc2d80c024a8",
 }
-
-
-def feed(h, *values) -> None:
-    for v in values:
-        if isinstance(v, dict):
-            for k in sorted(v):
-                h.update(k.encode())
-                feed(h, v[k])
-        else:
-            a = v.detach().cpu().numpy() if isinstance(v, torch.Tensor) else np.asarray(v)
-            h.update(np.ascontiguousarray(a).tobytes())
 
 
 def battery_fields(drones) -> list:
