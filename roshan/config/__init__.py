@@ -38,6 +38,7 @@ from roshan.config.levels import (
     check_model_level,
     level_of,
 )
+from roshan.config.profiles import PROFILES, describe_profiles, profile_names, under_profile
 from roshan.config.schema import (
     ConfigError,
     choice,
@@ -79,9 +80,11 @@ class Config(schema.Section):
     iql: IQLConfig = field(default_factory=IQLConfig)
     rnd: RNDConfig = field(default_factory=RNDConfig)
     planner: PlannerConfig = field(default_factory=PlannerConfig)
+    profile: str = ""  # settings under the file's: thesis, newest, original, or several (thesis,original); see below
 
     def __post_init__(self):
         super().__post_init__()  # each section is a section of its class (they validated themselves)
+        profile_names(self.profile)
         check_refused_keys(self)
         check_step_counts(self)
 
@@ -121,12 +124,19 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
     (option, value)); ``cls`` is the root :class:`Config` unless a caller loads one section on its own."""
     if cls is not Config:
         return schema.load_config(path, overrides, cls=cls, flags=flags)
-    return schema.load_config(path, overrides, cls=cls, upgrade=upgrade_config_dict, moved=MOVED_KEYS, flags=flags)
+    return schema.load_config(path, overrides, cls=cls, upgrade=upgrade_config_dict, moved=MOVED_KEYS, flags=flags,
+                              base=under_profile)
 
 
 def apply_overrides(cfg, overrides: list[str] | tuple[str, ...], where: str = "--set"):
     """A copy of ``cfg`` with ``section.key=value`` overrides applied and validated (keys of older layouts
-    renamed as a file of that layout would be)."""
+    renamed as a file of that layout would be). A profile is a layer under a file's values, so it is chosen when
+    the file is loaded (its ``profile`` key, or ``--set profile=...`` of the command), not over a loaded config."""
+    for item in overrides:
+        if isinstance(cfg, Config) and item.split("=", 1)[0].strip() == "profile":
+            raise ConfigError(f"{where} {item!r}: a profile lies under the config file's values, so it cannot be "
+                              "set over a loaded config; name it in the config file (profile: NAME) or in the "
+                              "command's --set")
     return schema.apply_overrides(cfg, overrides, where, moved=MOVED_KEYS if isinstance(cfg, Config) else None)
 
 
@@ -137,7 +147,12 @@ def all_keys(cls: type = Config, prefix: str = "") -> list[str]:
 
 def show_keys(section: str = "") -> str:
     """``roshan config show [SECTION]``: every key of ``section`` (a section, a key, or "" for all) with its
-    default, type, allowed values and doc; an unknown section is a ConfigError with the closest name."""
+    default, type, allowed values and doc; an unknown section is a ConfigError with the closest name. ``profile``
+    lists the profiles and their values; every key's listing ends with them."""
+    if section == "profile":
+        return describe_profiles()
+    if not section:
+        return describe.format_keys(Config, describe.describe_keys(Config)) + "\n\n" + describe_profiles()
     return describe.format_keys(Config, describe.describe_keys(Config, section))
 
 
@@ -147,7 +162,7 @@ load_run_config = load_config
 __all__ = [
     "ALGO_LEVELS", "ANY_FLEET_NETWORKS", "CONTROLLERS", "FLY_AGENT", "Level", "PLANNER", "PLANNER_NEWEST_TERMS",
     "PLANNER_PRESETS",
-    "PRESETS", "Config", "ConfigError",
+    "PRESETS", "PROFILES", "Config", "ConfigError",
     "ConvectionConfig", "DroneConfig", "EnergyConfig", "FireConfig", "FlyConfig", "IQLConfig", "IgnitionConfig",
     "MapConfig",
     "FLY_ONLY_PPO_KEYS", "OptimConfig", "PPOConfig", "PlannerConfig", "PlannerRewardConfig", "RNDConfig",

@@ -121,11 +121,12 @@ def _unbool_choice(value, f: dataclasses.Field):
 
 def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = (), *, cls: type,
                 upgrade: Callable[[dict], dict] | None = None, moved: dict[str, str] | None = None,
-                flags: dict[str, tuple[str, Any]] | None = None):
+                flags: dict[str, tuple[str, Any]] | None = None, base: Callable[[dict], dict] | None = None):
     """Load ``path`` (YAML) into ``cls``, apply ``key.sub=value`` overrides and validate everything; ``upgrade``
     brings the file's dict from an older layout first, and ``moved`` (old dotted key -> new) renames override
     keys of that older layout. ``flags`` (dotted key -> (option, value), e.g. ``{"wind.speed": ("--wind-speed",
-    -3.0)}``) are a command's own options for keys; they apply before the overrides.
+    -3.0)}``) are a command's own options for keys; they apply before the overrides. ``base`` then fills in what
+    the file, the flags and the overrides leave unset (the profiles the result names).
 
     Raises:
         ConfigError: naming where the bad value came from (the file, ``--set`` or the option), the key and what
@@ -157,6 +158,8 @@ def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str
         origins[key] = option
     for item in overrides:
         origins[_apply_override(data, item, cls, moved or {})] = "--set"
+    if base is not None:
+        data = base(data)
     return from_dict(cls, data, where=where, origins=origins)
 
 

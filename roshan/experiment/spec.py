@@ -153,6 +153,7 @@ class Run:
         later with a default does not make every stored run look changed), controller, evaluation and buffer."""
         c = self.condition
         values = to_dict(c.run_config(self.seed))
+        del values["profile"]  # the values it resolved to decide the run, not its name
         for section, keys in DEFAULTS_OF_RECORD.items():  # a key left to its default: fingerprinted as it was then
             for key, then in keys.items():
                 if not c.names_key(f"{section}.{key}"):
