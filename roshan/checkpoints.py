@@ -24,7 +24,8 @@ from pathlib import Path
 
 import torch
 
-from roshan.config import Config, ConfigError, from_dict, to_dict, upgrade_agent_state, upgrade_config_dict
+from roshan.config import Config, ConfigError, from_dict, to_dict, upgrade_agent_state
+from roshan.config.upgrade import upgrade_saved_config
 from roshan.io import atomic_file, inside, prepare_output, writing
 
 CHECKPOINTS = ("latest", "best_reward", "best_objective", "best_eval")
@@ -134,9 +135,9 @@ def load_checkpoint(path: str | Path) -> dict:
 
 def upgrade_checkpoint(state: dict) -> dict:
     """A checkpoint of an earlier version in the current layout: the config dict through
-    :func:`roshan.config.upgrade_config_dict`, and the planner PPO's single ``optimizer`` / ``scheduler`` as the
-    lists of the one PPO class (the network weights are untouched)."""
-    state = {**state, "config": upgrade_config_dict(state["config"])}
+    :func:`roshan.config.upgrade.upgrade_saved_config`, and the planner PPO's single ``optimizer`` /
+    ``scheduler`` as the lists of the one PPO class (the network weights are untouched)."""
+    state = {**state, "config": upgrade_saved_config(state["config"])}
     if "agent" in state:
         state["agent"] = upgrade_agent_state(state["algo"], state["agent"])
     return state
@@ -144,7 +145,7 @@ def upgrade_checkpoint(state: dict) -> dict:
 
 def config_of_checkpoint(state: dict, where: str) -> Config:
     try:
-        return from_dict(Config, upgrade_config_dict(state["config"]), where=where)
+        return from_dict(Config, upgrade_saved_config(state["config"]), where=where)
     except ConfigError as exc:
         raise ValueError(f"{where}: the checkpoint's config does not fit this version ({exc})") from exc
 

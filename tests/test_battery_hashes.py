@@ -57,7 +57,8 @@ def fly() -> str:
     cfg = Config(ignition=IgnitionConfig(fire_percentage=0.05),
                  drones=DroneConfig(num_drones=3, use_water_limit=True, water_capacity=2.0,
                                     groundstation_start_percentage=0.5,
-                                    energy=EnergyConfig(preset="scenario", capacity=900.0, swap_time=1.0)))
+                                    energy=EnergyConfig(preset="scenario", capacity=900.0, swap_time=1.0,
+                                                        approach=0.0)))
     env = FlyVectorEnv(num_envs=4, config=cfg, fly=FlyConfig(policy="complex", collision=True), seed=5)
     g = torch.Generator().manual_seed(1)
     frames = EnvZeroFrames(env.drones)
@@ -89,9 +90,11 @@ SCENARIOS = {
     "fly": fly,
     "planner_rules_waiting": lambda: planner("planner", EnergyConfig(preset="scenario", capacity=3000.0, approach=2.0),
                                              planner_resources=True, return_queue="waiting"),
-    "planner_plain_tiny": lambda: planner("planner", EnergyConfig(preset="scenario", capacity=300.0), water=False),
-    "greedy_aware_all": lambda: planner("greedy", EnergyConfig(preset="scenario", capacity=3000.0),
-                                        greedy_resources=True, greedy_home="fixed"),
+    # pinned when no final approach and the reserve for every other drone's turn were the defaults
+    "planner_plain_tiny": lambda: planner("planner", EnergyConfig(preset="scenario", capacity=300.0, approach=0.0),
+                                          water=False),
+    "greedy_aware_all": lambda: planner("greedy", EnergyConfig(preset="scenario", capacity=3000.0, approach=0.0),
+                                        greedy_resources=True, greedy_home="fixed", return_queue="all"),
     "greedy_aware_none": lambda: planner("greedy", EnergyConfig(preset="scenario", capacity=3000.0, approach=1.5),
                                          greedy_resources=True, return_queue="none"),
 }

@@ -123,11 +123,11 @@ class PlannerConfig(Section):
     greedy_energy_margin: float = num(0.25, 0.0, doc="resource-aware greedy: a drone flies home once its battery "
                                                     "holds at most (1 + margin) x the energy of the flight home, "
                                                     "plus the energy of waiting there for every other drone's turn")
-    return_queue: str = choice("all", ("all", "waiting", "none"),
-                               doc="the return rule's reserve for waiting at the base: every other drone's turn "
-                                   "(all), the turns of the drones flying home or waiting there now (waiting), or "
-                                   "none (landed drones swap side by side); with many drones `all` asks for more "
-                                   "than a battery")
+    return_queue: str = choice("waiting", ("waiting", "all", "none"),
+                               doc="the return rule's reserve for waiting at the base: the turns of the drones "
+                                   "flying home or waiting there now (waiting), every other drone's turn, the worst "
+                                   "case, which with many drones is more than a battery holds (all), or none "
+                                   "(landed drones swap side by side)")
     planner_resources: bool = False  # with a battery: planner drones go home on the aware greedy's rule by themselves
     max_candidates: int = num(0, 0, 1 << 24,
                               doc="candidate list length K (groundstation included); 0 = every cell + 1")
@@ -136,8 +136,7 @@ class PlannerConfig(Section):
                                  "the sampled goals so training episodes can end in success; argmax is unchanged")
     distance_prior: float = num(0.0, 0.0, 1000.0,
                                 doc="beyond the thesis: w0 > 0 adds -w |fire - drone| (normalised map units) to each "
-                                    "drone's logits, w learned from w0 (a closer fire likelier); 0 = off, the "
-                                    "networks as they were")
+                                    "drone's logits, w learned from w0 (a closer fire likelier); 0 = off")
     distinct_goals: bool = False  # thesis net: drones choose in id order, each from the fires no earlier one took
     network: str = choice("thesis", ("thesis", "pointer", "fleet"),
                           doc="the planner network: docs/model/learning.md §3.1 (thesis), §3.2 (pointer, newest), or "

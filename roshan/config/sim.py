@@ -121,10 +121,11 @@ class EnergyConfig(Section):
     payload_power: float | None = num(None, 0.0, doc="extra power with a full tank (W), scaled by the tank's fill "
                                                      "with the water limit (else always full)")
     swap_time: float | None = num(None, 0.0, doc="seconds on the groundstation cell to swap in a full battery")
-    approach: float = num(0.0, 0.0, doc="cells from the groundstation's centre within which a drone flying home "
+    approach: float = num(2.0, 0.0, doc="cells from the groundstation's centre within which a drone flying home "
                                         "(with the landing rule of the planner level) flies the final approach "
                                         "straight in, out of the others' way: like a landed drone it neither sees "
-                                        "nor is seen by them, nor the map's edge (0: off)")
+                                        "nor is seen by them, nor the map's edge (0: none, the FlyAgent flies it "
+                                        "up to the cell, where drones arriving together can keep each other off it)")
 
     def __post_init__(self):
         super().__post_init__()
@@ -167,7 +168,8 @@ class DroneConfig(Section):
     def inert(self) -> list[str]:
         """Settings that change nothing here, each as a warning line: set but silent, they read as if
         they had been applied."""
-        if not self.energy.enabled and self.energy.approach > 0:
+        # 0 asks for no approach and the default is nobody's choice: any other value was set to be used
+        if not self.energy.enabled and self.energy.approach not in (0.0, EnergyConfig().approach):
             return [f"drones.energy.approach = {self.energy.approach!r} does nothing while drones.energy.preset is "
                     "off: only a drone flying home to swap its battery makes the final approach"]
         return []

@@ -51,6 +51,7 @@ import yaml
 from roshan.algos.frozen import fly_model_path
 from roshan.checkpoints import resolve_checkpoint
 from roshan.config import Config, apply_overrides, load_config
+from roshan.config.profiles import profile_values
 from roshan.config.schema import to_dict
 from roshan.experiment.findings import Finding, parse_findings
 
@@ -117,12 +118,15 @@ class Condition:
         return self.controller == "policy"
 
     def names_key(self, dotted: str) -> bool:
-        """Whether the condition's config file or its ``set`` gives ``section.key`` (else the run takes the
-        default)."""
+        """Whether the condition's config file, the profiles it names or its ``set`` give ``dotted`` (else the run
+        takes the default)."""
         if any(item.split("=", 1)[0].strip() == dotted for item in self.sets):
             return True
-        section, key = dotted.split(".", 1)
-        return isinstance(self._file_data.get(section), dict) and key in self._file_data[section]
+        node = self._file_data
+        *sections, key = dotted.split(".")
+        for s in sections:
+            node = node.get(s) if isinstance(node, dict) else None
+        return (isinstance(node, dict) and key in node) or dotted in profile_values(self._file_data.get("profile", ""))
 
     def run_config(self, seed: int, extra: tuple[str, ...] = ()) -> Config:
         """The config of this condition's run with ``seed`` (the condition's overrides, then ``extra``)."""
@@ -154,10 +158,9 @@ class Run:
         c = self.condition
         values = to_dict(c.run_config(self.seed))
         del values["profile"]  # the values it resolved to decide the run, not its name
-        for section, keys in DEFAULTS_OF_RECORD.items():  # a key left to its default: fingerprinted as it was then
-            for key, then in keys.items():
-                if not c.names_key(f"{section}.{key}"):
-                    values[section][key] = then
+        for dotted, then in DEFAULTS_OF_RECORD.items():  # a key left to its default: fingerprinted as it was then
+            if not c.names_key(dotted):
+                _set_dotted(values, dotted, then)
         body = [_non_defaults(values, defaults_of_record()), c.controller,
                 c.eval_episodes, c.eval_seed, c.eval_envs, c.buffer and vars(c.buffer)]
         changed = {k: digest for k, (target, digest) in self.models().items()
@@ -236,8 +239,9 @@ class Spec:
 # changed default neither makes a stored run look changed (every FlyAgent run holds a planner section) nor hides a
 # real difference (a run that set the new default's value explicitly was already non-default then). The one case
 # it cannot tell apart: a condition that relies on the default and ran both before and after the change; give
-# such a condition the key explicitly (configs/thesis/planner.yaml sets planner.greedy_home).
-DEFAULTS_OF_RECORD = {"planner": {"greedy_home": "original"}}
+# such a condition the key explicitly (configs/thesis/planner.yaml sets planner.greedy_home, configs/endurance.yaml
+# the return rule's reserve and the final approach).
+DEFAULTS_OF_RECORD = {"planner.greedy_home": "original", "planner.return_queue": "all", "drones.energy.approach": 0.0}
 
 # The models the stored runs loaded, by the digest of the checkpoint file each setting resolved to when runs began to
 # be fingerprinted by their models' contents: a run that loads one of these (the same setting, the same bytes)
@@ -265,9 +269,16 @@ def _file_digest(path: str, size: int, mtime_ns: int) -> str:  # size and mtime:
 def defaults_of_record() -> dict:
     """Today's config defaults with :data:`DEFAULTS_OF_RECORD` over them."""
     out = to_dict(Config())
-    for section, values in DEFAULTS_OF_RECORD.items():
-        out[section] = {**out[section], **values}
+    for dotted, then in DEFAULTS_OF_RECORD.items():
+        _set_dotted(out, dotted, then)
     return out
+
+
+def _set_dotted(values: dict, dotted: str, value) -> None:
+    *sections, key = dotted.split(".")
+    for s in sections:
+        values = values[s]
+    values[key] = value
 
 
 def _non_defaults(values: dict, defaults: dict) -> dict:

@@ -9,6 +9,8 @@ import pytest
 from roshan.config import (
     Config,
     ConfigError,
+    DroneConfig,
+    EnergyConfig,
     FlyConfig,
     IgnitionConfig,
     MapConfig,
@@ -16,7 +18,9 @@ from roshan.config import (
     PPOConfig,
     SimConfig,
     all_keys,
+    from_dict,
     load_config,
+    to_dict,
 )
 from roshan.kernels.episode import EpisodeKernels
 
@@ -191,3 +195,19 @@ def test_a_step_limit_beyond_int32_is_refused():
     # a drone of 1e-30 m/s gave a T_max of 3e34 steps, wrapped in the kernels' int32 counters
     with pytest.raises(ConfigError, match="step limit T_max = 3e.34 steps.*raise drones.max_speed"):
         EpisodeKernels(None, 3 * 10**34)
+
+
+def test_a_checkpoint_saved_before_a_key_existed_keeps_the_behaviour_it_had():
+    """The return rule's reserve and the final approach changed default after runs were saved without those keys:
+    such a checkpoint's config loads with the rule its run had, while a config file that leaves them out (and a
+    checkpoint that has them) takes what it says."""
+    from roshan.config.upgrade import ADDED_KEYS, upgrade_saved_config
+
+    saved = to_dict(Config(drones=DroneConfig(energy=EnergyConfig(preset="scenario"))))
+    del saved["planner"]["return_queue"], saved["drones"]["energy"]["approach"]
+    cfg = from_dict(Config, upgrade_saved_config(saved))
+    assert (cfg.planner.return_queue, cfg.drones.energy.approach) == ("all", 0.0) == tuple(ADDED_KEYS.values())
+    assert "return_queue" not in saved["planner"]  # the caller's dict is left alone
+    fresh = Config(drones=DroneConfig(energy=EnergyConfig(preset="scenario")))
+    assert (fresh.planner.return_queue, fresh.drones.energy.approach) == ("waiting", 2.0)
+    assert from_dict(Config, upgrade_saved_config(to_dict(fresh))) == fresh

@@ -295,7 +295,7 @@ def test_drones_restocking_under_the_return_rule_share_no_goal():
 def test_options_that_do_nothing_without_a_battery_say_so_once():
     # issue 52: planner.planner_resources and drones.energy.approach with the battery off, and
     # planner.max_candidates=1, changed nothing and said nothing
-    cfg = Config(ignition=FIRES, drones=DroneConfig(num_drones=3, energy=EnergyConfig(approach=2.0)),
+    cfg = Config(ignition=FIRES, drones=DroneConfig(num_drones=3, energy=EnergyConfig(approach=1.5)),
                  wind=WindConfig(speed=0.0))
     pc = PlannerConfig(interval=1, fly_model=MODEL, explorer_model=MODEL, num_explorers=2, planner_resources=True,
                        max_candidates=1)
@@ -303,7 +303,7 @@ def test_options_that_do_nothing_without_a_battery_say_so_once():
         env = PlannerVectorEnv(2, cfg, pc, evaluation=True, controller="greedy", seed=3)
     env.close()
     said = [str(w.message) for w in caught]
-    for words in ("drones.energy.approach = 2.0 does nothing while drones.energy.preset is off",
+    for words in ("drones.energy.approach = 1.5 does nothing while drones.energy.preset is off",
                   "planner.planner_resources = true does nothing while drones.energy.preset is off",
                   "planner.max_candidates = 1 lists the groundstation alone"):
         assert sum(words in line for line in said) == 1, said
