@@ -4,10 +4,11 @@ Reward presets are data (thesis Tables 5.3-5.5, 5.7, 5.9); the ``ti.func``s that
 :mod:`roshan.kernels.rewards`.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from roshan.config.levels import ANY_FLEET_NETWORKS
 from roshan.config.schema import INT32_MAX, ConfigError, Section, choice, num
+from roshan.config.sim import DroneConfig, EnergyConfig
 
 # Thesis Table 5.3 (defaults), Table 5.4 (best single Optuna trial), Table 5.5 (mean of the top-10 trials).
 PRESETS: dict[str, dict[str, float]] = {
@@ -159,6 +160,12 @@ class PlannerConfig(Section):
     def fleets(self) -> tuple[int, ...]:
         """The fleet sizes training takes in turn (``fleet_sizes``); () for one fleet, ``drones.num_drones``."""
         return tuple(int(s) for s in self.fleet_sizes.replace(" ", "").split(",")) if self.fleet_sizes.strip() else ()
+
+    def explorer_drones(self, drones: DroneConfig) -> DroneConfig:
+        """The explorers' drone section: the planner drones' physics with the explorers' count, speed and view range,
+        and no battery (the scouts keep flying: the battery is the fire-fighting drones' constraint)."""
+        return replace(drones, num_drones=self.num_explorers, max_speed=self.explorer_speed,
+                       view_range=self.explorer_view_range, energy=EnergyConfig())
 
     def inert(self, battery: bool) -> list[str]:
         """Settings that change nothing (or nothing useful) here, each as a warning line; ``battery``:

@@ -6,6 +6,11 @@ return rules reserve (the flight home, the queue at the base).
 A DroneSim holds a :class:`Battery` with ``drones.energy`` and a :class:`NoBattery` without: both answer the same
 ``ti.func``s, the second with the constants of a drone that flies forever, so that no caller branches on whether
 there is a battery. The charge is in joules, per drone on the ``(E, N)`` axes of the DroneSim.
+
+The rules of the planner level that a battery brings are strategy objects here too, which the goal rules of
+:mod:`roshan.kernels.tasks` call: the return rule (:class:`ReturnWhenLow`, its queue reserve :class:`EveryOtherTurn`,
+:class:`TurnsOfTheWaiting` or :class:`NoQueue`, and :class:`NoReturn` without a battery or with the rule off) and the
+landing rule (:class:`LandAtBase`, :class:`NoLanding`), beside the final approach (:class:`FinalApproach`).
 """
 
 import math
@@ -13,6 +18,7 @@ import math
 import taichi as ti
 
 from roshan.config import EnergyConfig
+from roshan.kernels.tasks import AWAY, HOME, RESTOCKED, take_cell
 
 
 @ti.data_oriented
@@ -59,6 +65,14 @@ class Battery:
             service = max(service, math.ceil((dr.cfg.recharge_time + 1e-4) / dr.dt))
         power = self.hover_power + self.speed_power * dr.v_max * dr.v_max + self.payload_power
         return (dr.num_drones - 1) * service * dr.dt * power
+
+    def return_rule(self, margin: float, queue: str):
+        """The return rule of the resource-aware heuristic for these drones (:class:`ReturnWhenLow`)."""
+        return ReturnWhenLow(self.drones, margin, queue)
+
+    def landing_rule(self):
+        """The planner level's landing rule for these drones (:class:`LandAtBase`)."""
+        return LandAtBase(self.drones)
 
     # ------------------------------------------------------------------------------------------ rules
 
@@ -155,6 +169,14 @@ class Battery:
         power = self.hover_power + self.speed_power * speed_sq + self.payload_power
         return power * long_axis / dr.v_max
 
+    @ti.func
+    def observe(self, obs: ti.template(), e, d, col):
+        """The planner observation's energy part of drone d (``obs[e, col:col + 2]``): its charge and the charge its
+        quickest flight home needs, both as fractions of a full battery."""
+        obs[e, col] = self.charge_fraction(e, d)
+        home = self.energy_home(e, d) / self.capacity
+        obs[e, col + 1] = ti.math.clamp(home, 0.0, 1.0)
+
     # ------------------------------------------------------------------------------------------ per env
 
     @ti.func
@@ -199,6 +221,13 @@ class NoBattery:
     def field_bytes(num_envs: int, num_drones: int) -> int:
         return 0
 
+    def return_rule(self, margin: float, queue: str):
+        check_queue(queue)
+        return NoReturn()  # nothing runs low
+
+    def landing_rule(self):
+        return NoLanding()  # nothing to land for
+
     @ti.func
     def fill(self, e, d):
         pass
@@ -230,6 +259,10 @@ class NoBattery:
     @ti.func
     def energy_home(self, e, d) -> ti.f32:
         return 0.0
+
+    @ti.func
+    def observe(self, obs: ti.template(), e, d, col):
+        pass  # the planner observation has no energy part
 
     @ti.func
     def lost_count(self, e) -> ti.i32:
@@ -289,3 +322,175 @@ class NoApproach:
     @ti.func
     def sees_edge(self, down) -> ti.i32:
         return 1
+
+
+# ---------------------------------------------------------------------------------------------- the return rule
+
+
+@ti.data_oriented
+class EveryOtherTurn:
+    """The queue reserve ``all``: every other drone's turn at the base (:meth:`Battery.base_queue_energy`)."""
+
+    def __init__(self, drones):
+        self.drones = drones
+
+    @ti.func
+    def reserve(self, e, d) -> ti.f32:
+        return self.drones.battery.queue_energy
+
+
+@ti.data_oriented
+class TurnsOfTheWaiting:
+    """The queue reserve ``waiting``: the turns of the other drones flying home or waiting there now, a turn each
+    (:attr:`Battery.turn_energy`). An env's drones step one after another, so the count is the same at any thread
+    count."""
+
+    def __init__(self, drones):
+        self.drones = drones
+
+    @ti.func
+    def reserve(self, e, d) -> ti.f32:
+        dr = self.drones
+        ahead = 0
+        for o in range(dr.num_drones):
+            if o != d and dr.refilling[e, o] != 0 and dr.battery.is_lost(e, o) == 0:
+                ahead += 1
+        return ahead * dr.battery.turn_energy
+
+
+@ti.data_oriented
+class NoQueue:
+    """The queue reserve ``none``: landed drones swap side by side, so no drone waits for another's turn."""
+
+    def __init__(self, drones):
+        pass
+
+    @ti.func
+    def reserve(self, e, d) -> ti.f32:
+        return 0.0
+
+
+QUEUES = {"all": EveryOtherTurn, "waiting": TurnsOfTheWaiting, "none": NoQueue}  # planner.return_queue
+
+
+def check_queue(queue: str) -> None:
+    if queue not in QUEUES:
+        raise ValueError(f"queue: expected {', '.join(QUEUES)}, got {queue!r}")
+
+
+@ti.data_oriented
+class ReturnWhenLow:
+    """The resource-aware heuristic's return rule (issue 33): a drone flies home once its battery holds no more than
+    (1 + ``margin``) times what its flight home takes (:meth:`Battery.energy_home`) plus its ``queue`` reserve, or
+    its tank is empty; it waits there until both are full again (``refilling``). With 16 drones and the realistic
+    battery, fifteen 120 s swaps at full power ask for more than a full battery, so with the ``all`` queue every drone
+    would turn home as soon as it left.
+
+    Args:
+        drones: the group whose drones the rule sends home (with a battery).
+        margin: ``planner.greedy_energy_margin``.
+        queue: the reserve for the queue at the base, ``planner.return_queue``: ``all`` (:class:`EveryOtherTurn`),
+            ``waiting`` (:class:`TurnsOfTheWaiting`) or ``none`` (:class:`NoQueue`).
+    """
+
+    def __init__(self, drones, margin: float, queue: str):
+        check_queue(queue)
+        self.drones, self.margin = drones, margin
+        self.queue = QUEUES[queue](drones)
+
+    @ti.func
+    def watch(self, e, d) -> ti.i32:
+        """Drone d's return this step, as :mod:`roshan.kernels.tasks` reads it: ``HOME`` while it flies home or
+        waits there (sent home now, its fire freed for the others), ``RESTOCKED`` on the step it is stocked again
+        (the caller gives it its next goal), else ``AWAY``."""
+        dr = self.drones
+        state = AWAY
+        if dr.refilling[e, d] != 0:
+            state = HOME
+        if state == HOME and dr.is_stocked(e, d) != 0:  # a full battery and tank again: back to the fires
+            dr.refilling[e, d] = 0
+            state = RESTOCKED
+        elif state == AWAY:
+            need = (1.0 + self.margin) * dr.battery.energy_home(e, d) + self.queue.reserve(e, d)
+            if dr.battery.is_low(e, d, need) != 0 or dr.has_water(e, d) == 0:
+                dr.refilling[e, d] = 1
+                state = HOME
+                take_cell(dr, e, d, -1)  # its fire is free for the others
+        return state
+
+    @ti.func
+    def keeps_goal(self, e, d) -> ti.i32:
+        """Drone d flies home or waits there to restock: the planner's goals do not move it, nor share its fire."""
+        return self.drones.refilling[e, d]
+
+    @ti.func
+    def send_home(self, e, d):
+        """The planner chose the groundstation for drone d: short of a full battery or tank, it stays there until
+        stocked."""
+        if self.drones.is_stocked(e, d) == 0:
+            self.drones.refilling[e, d] = 1
+
+
+@ti.data_oriented
+class NoReturn:
+    """No return rule (no battery, or the rule off): no drone flies home by itself, and the groundstation is a goal
+    like any other."""
+
+    @ti.func
+    def watch(self, e, d) -> ti.i32:
+        return AWAY
+
+    @ti.func
+    def keeps_goal(self, e, d) -> ti.i32:
+        return 0
+
+    @ti.func
+    def send_home(self, e, d):
+        pass
+
+
+# ---------------------------------------------------------------------------------------------- the landing rule
+
+
+@ti.data_oriented
+class LandAtBase:
+    """The planner level's landing rule (with a battery; the planner and both heuristics alike): a drone that waits at
+    the groundstation lands on its cell and stays put instead of following the FlyAgent (:meth:`is_landed`), and a
+    drone on its final approach (:class:`FinalApproach`) flies the last metres straight in."""
+
+    def __init__(self, drones):
+        self.drones = drones
+
+    @ti.func
+    def is_landed(self, e, d) -> ti.i32:
+        """Drone d waits at the groundstation (sent home until stocked, or there without a fire: the planner's
+        groundstation goal or an idle heuristic drone) and is on its cell. Issue 33: hovering there, the
+        collision-trained FlyAgent jostled the drones that waited at once (and the ones lost beside the cell) off it
+        and on again, so none stayed the swap's 3 s in a row; they waited 100-170 s beside the base and came down
+        there (26 of 64 drones in 16 endurance episodes of the aware greedy)."""
+        dr = self.drones
+        waits = dr.refilling[e, d]
+        if waits == 0:
+            waits = ti.cast(dr.heads_home(e, d) != 0 and dr.goal_cell[e, d] < 0, ti.i32)
+        return ti.cast(waits != 0 and dr.at_groundstation(e, d) != 0, ti.i32)
+
+    @ti.func
+    def action(self, e, d, a):
+        """The action drone d flies instead of its FlyAgent's ``a``: hold still once landed, straight in on the final
+        approach, else ``a``."""
+        dr = self.drones
+        out = a
+        if self.is_landed(e, d) != 0:
+            out = dr.hold_action(e, d)
+        elif dr.landing.is_approaching(e, d) != 0:  # the last metres straight in, not by the FlyAgent
+            out = dr.straight_to_base(e, d)
+        return out
+
+
+@ti.data_oriented
+class NoLanding:
+    """No landing rule (no battery): every drone flies by its FlyAgent wherever it is."""
+
+    @ti.func
+    def action(self, e, d, a):
+        return a

@@ -90,14 +90,18 @@ class DroneSim:
         self._burning = tasks.BurningCells(fire)  # assign_fire_goals' candidates
 
     @staticmethod
-    def field_bytes(num_envs: int, num_drones: int, battery: bool = False) -> int:
-        """Bytes of the fields (and host arrays) a DroneSim of ``num_envs`` x ``num_drones`` allocates, known before
-        it is built, its ``battery``'s included (``drones.energy.enabled``); the water tanks, full once built, once
-        more for the pristine copy of the simulator pool."""
-        n = num_drones
+    def field_bytes(num_envs: int, cfg: DroneConfig) -> int:
+        """Bytes of the fields (and host arrays) a DroneSim of ``num_envs`` envs of ``cfg`` drones allocates, known
+        before it is built, its battery's included (``drones.energy``); the water tanks, full once built, once more
+        for the pristine copy of the simulator pool."""
+        n = cfg.num_drones
         per_drone = 8 + 8 + 4 + 4 + 8 + 4 + 4 + 4 + 4 + 4 + 4 + 4  # pos ... refilling
         per_env = n * per_drone + n * n * (16 + 4) + 8 + 4  # + neighbours, their mask, groundstation, _all
-        return num_envs * (per_env + 4 * n) + (Battery if battery else NoBattery).field_bytes(num_envs, n)
+        return num_envs * (per_env + 4 * n) + (Battery if cfg.energy.enabled else NoBattery).field_bytes(num_envs, n)
+
+    def parts(self) -> list:
+        """The components that hold fields of their own (its battery): the simulator pool restores them too."""
+        return [self.battery]
 
     # ------------------------------------------------------------------------------------------ public API
 
@@ -226,7 +230,7 @@ class DroneSim:
     @ti.func
     def hold_action(self, e, d):
         """The action that keeps drone d where it is: no velocity command, or in acceleration mode the one that brakes
-        it (landed at the groundstation, :meth:`roshan.kernels.tasks.GoalRules.is_landed`)."""
+        it (landed at the groundstation, :meth:`roshan.kernels.battery.LandAtBase.is_landed`)."""
         a = ti.Vector([0.0, 0.0])
         if ti.static(self.use_accel):
             a = ti.math.clamp(-self.vel[e, d] / (self.accel * self.dt), -1.0, 1.0)
@@ -312,6 +316,11 @@ class DroneSim:
         return best
 
     # ------------------------------------------------------------------------------------------ goals
+
+    @ti.func
+    def is_lost(self, e, d) -> ti.i32:
+        """Drone d came down where its battery ran empty: down for the rest of the episode."""
+        return self.battery.is_lost(e, d)
 
     @ti.func
     def is_down(self, e, d) -> ti.i32:

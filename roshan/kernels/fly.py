@@ -6,8 +6,8 @@ the objective), is checked for termination and rewarded; then neighbours and col
 env step (a control period, docs/model/agents.md §12) runs ``frame_skips`` physics steps with the same actions, fewer if
 the episode ends, and then pushes one observation frame. A second launch copies the observation of every env
 whose episode ended to ``final_obs`` and resets it (Gymnasium's same-step autoreset,
-:class:`roshan.kernels.episode.EpisodeKernels`). The goal rules are :class:`roshan.kernels.tasks.GoalRules`,
-shared with the planner level.
+:class:`roshan.kernels.episode.EpisodeKernels`). The goal rules are :class:`roshan.kernels.tasks.FlyRules`, whose
+shared parts the planner level's rules use too.
 """
 
 import math
@@ -22,7 +22,7 @@ from roshan.kernels.drones import DroneSim
 from roshan.kernels.episode import EpisodeKernels
 from roshan.kernels.fire import FireSim
 from roshan.kernels.rewards import RewardCoefficients, fly_reward, proximity_sum
-from roshan.kernels.tasks import EXTINGUISH, REACH, BurningCells, GoalRules
+from roshan.kernels.tasks import BurningCells, FlyRules
 
 
 def time_limit(rows: int, cols: int, cell: float, dt: float, v_max: float, fire_percentage: float,
@@ -56,8 +56,7 @@ class FlyKernels(EpisodeKernels):
         if not 1 <= cfg.frame_skips <= 16:
             raise ValueError(f"fly.frame_skips = {cfg.frame_skips!r}; expected an integer in [1, 16]")
         # Complex policy with a finite tank: an empty drone flies home and waits there until full.
-        self.rules = GoalRules(drones, BurningCells(fire), mode=EXTINGUISH if self.is_complex else REACH,
-                               water_policy=self.is_complex and drones.use_water, sticky=cfg.sticky_extinguish)
+        self.rules = FlyRules(drones, BurningCells(fire), extinguish=self.is_complex, sticky=cfg.sticky_extinguish)
         self.goal_fire_p = cfg.fire_goal_percentage
 
     @ti.kernel
@@ -156,8 +155,8 @@ class FlyKernels(EpisodeKernels):
         if ti.static(self.collision_on):
             if self.drones.collided[e, d] != 0:
                 reason = COLLISION
-        if self.drones.battery.is_lost(e, d) != 0:
-            reason = LOST  # its battery ran empty away from the groundstation
+        if self.drones.is_lost(e, d) != 0:
+            reason = LOST
         if timed_out != 0:
             reason = TIMEOUT
         return reason

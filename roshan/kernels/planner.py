@@ -6,8 +6,8 @@ One planner step of env e is ``apply`` (the chosen candidates become the drones'
 frozen FlyAgent policies in between), then ``finish`` (reward, termination, a fresh observation). With the
 greedy controller (the heuristic baseline of docs/model/agents.md §10.2) ``apply`` is skipped, the drones pick their own
 goals inside ``low_step`` and an episode may end at any low-level step. The low-level drone step and its goal
-rules are the FlyAgent level's (:class:`roshan.kernels.tasks.GoalRules`); this module adds the decisions,
-the planner rewards and termination on top.
+rules are :class:`roshan.kernels.tasks.PlannerDroneRules` and :class:`~roshan.kernels.tasks.GreedyRules`, which share
+their parts with the FlyAgent level's; this module adds the decisions, the planner rewards and termination on top.
 
 Deliberate differences from the reference (docs/model/agents.md §13.1, §13.5):
 - the observation is built after the interval from the state it ends in (the reference shows the planner the
@@ -25,14 +25,16 @@ import math
 import numpy as np
 import taichi as ti
 
+from roshan.config import PlannerConfig
 from roshan.episode import BURNOUT, LOST, TIMEOUT
 from roshan.kernels import observe
+from roshan.kernels.battery import NoReturn
 from roshan.kernels.drones import DroneSim
 from roshan.kernels.episode import EpisodeKernels
 from roshan.kernels.explore import ExploreMaps
 from roshan.kernels.fire import FireSim
-from roshan.kernels.rewards import planner_outcome_reward, planner_step_reward
-from roshan.kernels.tasks import DROP_ANYWHERE, EXTINGUISH, BurningCells, GoalRules, KnownFires
+from roshan.kernels.rewards import PlannerCoefficients, planner_outcome_reward, planner_step_reward
+from roshan.kernels.tasks import BurningCells, GreedyRules, KnownFires, PlannerDroneRules
 
 GROUND_GOAL = -2  # goal_cell of a drone sent to the groundstation by the planner
 
@@ -71,35 +73,29 @@ class PlannerKernels(EpisodeKernels):
     Args:
         fire, drones, explorers: the simulator and the two drone groups (same envs).
         maps: the fire map and meander waypoints (its drone group is ``explorers``).
-        interval: low-level steps per planner step (``hierarchy_timesteps``).
+        pc: the planner section (``interval``: low-level steps per planner step; ``rewards``; ``burnout``;
+            ``max_candidates``: length K of the candidate list, groundstation included, 0 for every cell + 1;
+            ``train_fires`` / ``eval_fires``; ``greedy_home``; the return rule of each controller,
+            ``greedy_resources`` / ``planner_resources`` with ``greedy_energy_margin`` and ``return_queue``).
+        controller: ``planner`` (the drones fly the planner's goals) or ``greedy`` (the heuristic state machine of
+            docs/model/agents.md §10.2).
+        evaluation: the explorers fly (in planner training they stay at the groundstation) and the candidates are
+            ``pc.eval_fires``; the heuristic always flies them and lists the fire map's cells.
         t_max: low-level step limit of an episode.
-        coef: :class:`roshan.kernels.rewards.PlannerCoefficients`.
-        greedy: the drones follow the heuristic state machine (docs/model/agents.md §10.2) instead of planner goals.
-        greedy_home_fixed: the heuristic with the groundstation fix (:class:`GoalRules`, ``wake_reserved``).
-        greedy_resources, energy_margin: with a battery, the resource-aware heuristic (:class:`GoalRules`).
-        return_queue: the rule's reserve for the queue at the base (:meth:`GoalRules.queue_reserve`).
-        planner_resources: with a battery, the planner's drones keep the same rule: a drone flies home on its own
-            once its battery or tank runs low, and the planner's goals for it count again once it is stocked;
-            choosing the groundstation for a drone short of either sends it home until stocked.
-        move_explorers: step the explorers (evaluation); in planner training they stay at the groundstation.
-        detected: the candidates are the fire map's cells (fires some drone has seen) instead of all burning
-            cells (centralised training).
-        burnout: burned-out fraction of the map that fails the episode.
-        max_candidates: length K of the candidate list (groundstation included).
         fly_frames, explore_frames: stacked FlyAgent frames of each group's policy.
     """
 
-    def __init__(self, fire: FireSim, drones: DroneSim, explorers: DroneSim, maps: ExploreMaps, *, interval: int,
-                 t_max: int, coef, greedy: bool, greedy_home_fixed: bool, move_explorers: bool, detected: bool,
-                 burnout: float, max_candidates: int, fly_frames: int, explore_frames: int,
-                 greedy_resources: bool = False, energy_margin: float = 0.25, planner_resources: bool = False,
-                 return_queue: str = "all"):
+    def __init__(self, fire: FireSim, drones: DroneSim, explorers: DroneSim, maps: ExploreMaps, pc: PlannerConfig, *,
+                 controller: str, evaluation: bool, t_max: int, fly_frames: int, explore_frames: int):
         super().__init__(fire, t_max)
         self.drones, self.explorers, self.maps = drones, explorers, maps
-        self.interval, self.coef = interval, coef
-        self.greedy, self.move_explorers, self.detected = greedy, move_explorers, detected
-        self.burnout = burnout
-        self.K = max_candidates
+        self.interval, self.coef = pc.interval, PlannerCoefficients.resolve(pc.rewards)
+        self.greedy = controller == "greedy"
+        self.move_explorers = evaluation or self.greedy
+        # the candidates: the fire map's cells (fires some drone has seen) or all burning cells (centralised training)
+        self.detected = (pc.eval_fires if evaluation else pc.train_fires) == "detected" or self.greedy
+        self.burnout = pc.burnout  # burned-out fraction of the map that fails the episode
+        self.K = max_candidates = pc.max_candidates or fire.num_cells + 1
         self.fly_frames, self.explore_frames = fly_frames, explore_frames
         self.use_water, self.use_energy = drones.use_water, drones.use_energy
         self.layout = obs_layout(drones.num_drones, max_candidates, energy=self.use_energy)
@@ -108,17 +104,20 @@ class PlannerKernels(EpisodeKernels):
         self.o_energy = self.layout["energy"][0] if self.use_energy else 0
         self.norm = 2.0 / max(fire.rows, fire.cols)  # norm(q) = q * norm - 1
         self.log_cells = math.log(1.0 + fire.num_cells)
-        # The low level runs the FlyAgent goal rules: planner drones drop water on every burning cell they fly
-        # over (docs/model/agents.md §7) and keep the planner's goals; the heuristic's drones pick known fires
-        # themselves.
-        if greedy:
-            self.rules = GoalRules(drones, KnownFires(fire, maps), mode=EXTINGUISH, wake_idle=True,
-                                   wake_reserved=not greedy_home_fixed, sensor=maps, resources=greedy_resources,
-                                   energy_margin=energy_margin, queue=return_queue, land=True)
+        # The return rule: with a battery and the controller's setting, a drone flies home on its own once its battery
+        # or tank runs low and stays there until stocked (for the planner's drones, choosing the groundstation for one
+        # short of either sends it home too, and the planner's goals for it count again once it is stocked).
+        aware = pc.greedy_resources if self.greedy else pc.planner_resources
+        self.returns = (drones.battery.return_rule(pc.greedy_energy_margin, pc.return_queue) if aware
+                        else NoReturn())
+        # The low level: the heuristic's drones pick known fires themselves; planner drones drop water on every
+        # burning cell they fly over (docs/model/agents.md §7) and keep the planner's goals.
+        landing = drones.battery.landing_rule()
+        if self.greedy:
+            self.rules = GreedyRules(drones, KnownFires(fire, maps), maps, returns=self.returns, landing=landing,
+                                     wake_reserved=pc.greedy_home == "original")
         else:
-            self.rules = GoalRules(drones, BurningCells(fire), mode=DROP_ANYWHERE, sensor=maps, land=True,
-                                   resources=planner_resources, energy_margin=energy_margin,
-                                   queue=return_queue)
+            self.rules = PlannerDroneRules(drones, BurningCells(fire), maps, returns=self.returns, landing=landing)
         E, N = fire.num_envs, drones.num_drones
         self.finished = ti.field(ti.i32, E)  # greedy: ended inside this planner step, skip the rest of it
         self.objective = ti.field(ti.i32, E)  # a drone put out the last burning cell in this planner step
@@ -284,11 +283,10 @@ class PlannerKernels(EpisodeKernels):
         gs = dr.groundstation_centre(e)
         for d in range(dr.num_drones):
             k = ti.cast(actions[e, d], ti.i32)
-            if ti.static(self.rules.resources):
-                if dr.refilling[e, d] != 0:
-                    continue  # on its way home or waiting there: its goal stays until it is stocked
-                if (k < 1 or k >= self.cand_count[e]) and dr.is_stocked(e, d) == 0:
-                    dr.refilling[e, d] = 1  # sent home short of a full battery or tank: it stays until stocked
+            if self.returns.keeps_goal(e, d) != 0:
+                continue  # on its way home or waiting there: its goal stays until it is stocked
+            if k < 1 or k >= self.cand_count[e]:
+                self.returns.send_home(e, d)  # short of a full battery or tank, it stays there until stocked
             if k >= 1 and k < self.cand_count[e]:
                 c = self.cand_cell[e, k]
                 dr.goal_cell[e, d] = c
@@ -313,8 +311,7 @@ class PlannerKernels(EpisodeKernels):
             skip = 0
             if ti.static(self.coef.newest):
                 skip = ground  # the newest code lets several drones wait at the groundstation
-            if ti.static(self.rules.resources):
-                skip = ti.max(skip, dr.refilling[e, d])  # flying home to restock: no fire shared with anyone
+            skip = ti.max(skip, self.returns.keeps_goal(e, d))  # flying home to restock: no fire shared with anyone
             if skip == 0:
                 for j in range(d):  # a duplicate if an earlier drone has the same goal
                     if dr.goal_cell[e, j] == dr.goal_cell[e, d]:
@@ -383,10 +380,7 @@ class PlannerKernels(EpisodeKernels):
             if ti.static(self.use_water):
                 w = ti.math.clamp(dr.water[e, d] / dr.capacity, 0.0, 1.0)
             obs[e, self.o_water + d] = w
-            if ti.static(self.use_energy):  # the observation's energy part: only with a battery
-                obs[e, self.o_energy + 2 * d] = dr.battery.charge_fraction(e, d)
-                home = dr.battery.energy_home(e, d) / dr.battery.capacity
-                obs[e, self.o_energy + 2 * d + 1] = ti.math.clamp(home, 0.0, 1.0)
+            dr.battery.observe(obs, e, d, self.o_energy + 2 * d)  # the observation's energy part (with a battery)
         f0 = self.o_fires
         m0 = self.o_mask
         gs = dr.groundstation_centre(e)

@@ -17,12 +17,12 @@ import hashlib
 import warnings
 import weakref
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import taichi as ti
 
-from roshan.config import CONTROLLERS, Config, EnergyConfig, FlyConfig, PlannerConfig
+from roshan.config import CONTROLLERS, Config, FlyConfig, PlannerConfig
 from roshan.kernels.drones import DroneSim
 from roshan.kernels.episode import EpisodeKernels
 from roshan.kernels.explore import ExploreMaps, meander_length
@@ -31,7 +31,6 @@ from roshan.kernels.fire_layout import FireSizes, choose_parallel, fire_sizes
 from roshan.kernels.fly import FlyKernels, time_limit
 from roshan.kernels.planner import PlannerKernels, planner_time_limit
 from roshan.kernels.render import EnvZeroFrames
-from roshan.kernels.rewards import PlannerCoefficients
 from roshan.maps import LandCoverMap
 from roshan.memory import check_fits, format_bytes
 from roshan.runtime import current_arch, ensure_taichi, for_this_runtime
@@ -85,7 +84,7 @@ def fly_estimate(land: LandCoverMap, cfg: Config, num_envs: int) -> Estimate:
     """What :func:`take_fly_sims` would allocate for ``num_envs`` envs (the renderer, made at the first frame,
     aside)."""
     fire_bytes, z = fire_estimate(land, cfg, num_envs)
-    drones = DroneSim.field_bytes(num_envs, cfg.drones.num_drones, cfg.drones.energy.enabled)
+    drones = DroneSim.field_bytes(num_envs, cfg.drones)
     return Estimate(fire_bytes + drones + EpisodeKernels.field_bytes(num_envs), z)
 
 
@@ -94,8 +93,8 @@ def planner_estimate(land: LandCoverMap, cfg: Config, pc: PlannerConfig, num_env
     fire_bytes, z = fire_estimate(land, cfg, num_envs)
     k = pc.max_candidates or land.rows * land.cols + 1
     max_len = meander_length(land.rows, land.cols, pc.num_explorers, pc.explorer_view_range, pc.meander)
-    total = (fire_bytes + DroneSim.field_bytes(num_envs, cfg.drones.num_drones, cfg.drones.energy.enabled)
-             + DroneSim.field_bytes(num_envs, pc.num_explorers)  # the explorers fly without a battery
+    total = (fire_bytes + DroneSim.field_bytes(num_envs, cfg.drones)
+             + DroneSim.field_bytes(num_envs, pc.explorer_drones(cfg.drones))
              + ExploreMaps.field_bytes(num_envs, land.rows, land.cols, pc.num_explorers, max_len)
              + PlannerKernels.field_bytes(num_envs, cfg.drones.num_drones, k))
     return Estimate(total, z, (f"a smaller planner.max_candidates (now {k:,} per env)",))
@@ -138,27 +137,15 @@ def take_planner_sims(land: LandCoverMap, cfg: Config, pc: PlannerConfig, num_en
     def build() -> PlannerSims:
         fire = FireSim(land, cfg.fire, cfg.wind, cfg.ignition, num_envs=num_envs, seed=seed, check_memory=False)
         drones = DroneSim(fire, cfg.drones)
-        # scouts keep flying: the battery is the fire-fighting drones' constraint
-        explorer_cfg = replace(cfg.drones, num_drones=pc.num_explorers, max_speed=pc.explorer_speed,
-                               view_range=pc.explorer_view_range, energy=EnergyConfig())
-        explorers = DroneSim(fire, explorer_cfg)
+        explorers = DroneSim(fire, pc.explorer_drones(cfg.drones))
         maps = ExploreMaps(fire, explorers, pc.num_explorers, pc.explorer_view_range, version=pc.meander,
                            index_bound=pc.explorer_index_bound)
         t_max = planner_time_limit(land.rows, land.cols, land.cell_size, cfg.fire.dt, cfg.drones.max_speed,
                                    cfg.ignition.fire_percentage, pc.time_limit)
-        max_candidates = pc.max_candidates or land.rows * land.cols + 1
-        greedy = controller == "greedy"
-        fires = pc.eval_fires if evaluation else pc.train_fires
-        kernels = PlannerKernels(
-            fire, drones, explorers, maps, interval=pc.interval, t_max=t_max,
-            coef=PlannerCoefficients.resolve(pc.rewards), greedy=greedy,
-            greedy_home_fixed=pc.greedy_home == "fixed", move_explorers=evaluation or greedy,
-            detected=fires == "detected" or greedy, burnout=pc.burnout, max_candidates=max_candidates,
-            fly_frames=fly_frames, explore_frames=explore_frames, greedy_resources=pc.greedy_resources,
-            energy_margin=pc.greedy_energy_margin, planner_resources=pc.planner_resources,
-            return_queue=pc.return_queue)
+        kernels = PlannerKernels(fire, drones, explorers, maps, pc, controller=controller, evaluation=evaluation,
+                                 t_max=t_max, fly_frames=fly_frames, explore_frames=explore_frames)
         viewer = EnvZeroFrames(drones, explorers, maps.fire_map)
-        return PlannerSims(fire, drones, explorers, maps, kernels, viewer, t_max, max_candidates)
+        return PlannerSims(fire, drones, explorers, maps, kernels, viewer, t_max, kernels.K)
 
     return current_pool().take(key, build, lambda: planner_estimate(land, cfg, pc, num_envs), extra_bytes, who, land,
                                seed, owner)
@@ -254,11 +241,12 @@ def pooled_count() -> int:
 
 
 def _simulators(sims: FlySims | PlannerSims) -> list[object]:
-    """The objects whose fields and attributes make a bundle's state, each drone group's battery included. The
-    viewer is left out: its fields are allocated at the first render and repainted whole by every render."""
+    """The objects whose fields and attributes make a bundle's state, each drone group's parts included
+    (:meth:`DroneSim.parts`). The viewer is left out: its fields are allocated at the first render and repainted
+    whole by every render."""
     objects = [v for v in vars(sims).values() if isinstance(v, (FireSim, DroneSim, ExploreMaps, FlyKernels,
                                                                 PlannerKernels))]
-    return objects + [v.battery for v in objects if isinstance(v, DroneSim)]
+    return objects + [part for v in objects if isinstance(v, DroneSim) for part in v.parts()]
 
 
 def _fields_of(objects: list[object]) -> tuple:

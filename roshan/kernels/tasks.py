@@ -1,30 +1,35 @@
 """The goal and extinguish rules of a drone (docs/model/agents.md §7, §10.1, §10.2), one copy for both levels.
 
-A FlyAgent drone and a drone flown under the planner run the same per-drone step: :meth:`GoalRules.drone_step`
-moves it (:meth:`roshan.kernels.drones.DroneSim.move_drone`), lets an optional sensor (the planner's fire map)
-look around it, then applies the rules at its goal. What differs between the levels is configuration:
+Each role has its rules, whose ``drone_step`` moves a drone (:meth:`roshan.kernels.drones.DroneSim.move_drone`)
+and applies the rules at its goal, unless the drone is down for good:
 
-- the candidate set of the nearest-fire search: every burning cell (:class:`BurningCells`, FlyAgent and the
-  planner's initial goals) or the fires the drones know of (:class:`KnownFires`, the greedy heuristic);
-- what a drone does where it is: drop water at its goal and take the next fire (``EXTINGUISH``, complex
-  FlyAgent and the heuristic), count reaching the goal as the objective (``REACH``, simple FlyAgent), or drop
-  water on every burning cell it flies over while the planner picks the goals (``DROP_ANYWHERE``).
+- :class:`FlyRules`, the FlyAgent's: count reaching the goal as the objective (simple policy), or drop water at the
+  goal and take the next fire, flying home to refill when the drop emptied the tank (complex policy);
+- :class:`GreedyRules`, the greedy heuristic's: the fires the drones know of, an idle drone takes one as soon as
+  there is one, and a return rule may send a drone home to restock;
+- :class:`PlannerDroneRules`, the planner's drones: they drop water on every burning cell they fly over while the
+  planner picks their goals, and a return rule may send one home.
 
-The search is one loop over a candidate set whose members are tested by the set itself, so the two sets keep
-their own order (the burning list's order vs row-major) and the first of equally near cells wins in both.
+The two rules of the planner level also let a landing rule take over a drone's action near the groundstation and
+the fire map (their sensor) look around each drone after its move. The return and landing rules are strategy
+objects (``ReturnWhenLow`` / ``NoReturn``, ``LandAtBase`` / ``NoLanding``) that answer :data:`AWAY`, :data:`HOME`
+or :data:`RESTOCKED` for a drone and the action it flies.
+
+The candidate set of the nearest-fire search is every burning cell (:class:`BurningCells`, FlyAgent and the
+planner's initial goals) or the fires the drones know of (:class:`KnownFires`, the greedy heuristic). The search is
+one loop over a candidate set whose members are tested by the set itself, so the two sets keep their own order (the
+burning list's order vs row-major) and the first of equally near cells wins in both.
 """
 
 import taichi as ti
 
-REACH, EXTINGUISH, DROP_ANYWHERE = range(3)
+AWAY, HOME, RESTOCKED = range(3)  # what a return rule says of a drone this step (ReturnWhenLow.watch)
 
 
 @ti.data_oriented
 class BurningCells:
     """Candidates: the fire's burning cells, in the order of its burning list. A reservation always holds
     (every candidate burns)."""
-
-    forgets = False  # the fire itself drops a put-out cell from the list
 
     def __init__(self, fire):
         self.fire = fire
@@ -47,15 +52,13 @@ class BurningCells:
 
     @ti.func
     def forget(self, e, c):
-        pass
+        pass  # the fire itself drops a put-out cell from the list
 
 
 @ti.data_oriented
 class KnownFires:
     """Candidates: the cells of the fire map (fires some drone has seen), in row-major order. Another drone's
     reservation holds only while its cell still burns: the map may list cells that went out unseen."""
-
-    forgets = True
 
     def __init__(self, fire, maps):
         self.fire, self.maps = fire, maps
@@ -122,181 +125,184 @@ def take_cell(drones: ti.template(), e, d, c):
     drones.goal[e, d] = goal
 
 
+@ti.func
+def retarget(drones: ti.template(), cands: ti.template(), e, d):
+    """Take the nearest free candidate (the groundstation if none is free)."""
+    take_cell(drones, e, d, nearest_free_cell(drones, cands, e, d))
+
+
+@ti.func
+def drop_at_goal(drones: ti.template(), cands: ti.template(), e, d) -> ti.i32:
+    """Drop water at drone d's goal and release its reservation (the candidate set forgets a fire put out);
+    returns 1 if that put out the map's last fire (the objective)."""
+    last = 0
+    if drones.extinguish_here(e, d) != 0:
+        drones.objective[e, d] = 1
+        last = 1
+    if drones.extinguished[e, d] != 0:
+        cands.forget(e, drones.cell_of(e, d))
+    drones.goal_cell[e, d] = -1
+    return last
+
+
+@ti.func
+def follow_goal(rules: ti.template(), e, d) -> ti.i32:
+    """The rules at drone d's goal (``rules.handle_goal``), unless it is down for good: a lost drone follows none."""
+    last = 0
+    if rules.drones.is_lost(e, d) == 0:
+        last = rules.handle_goal(e, d)
+    return last
+
+
+@ti.func
+def move_and_look(rules: ti.template(), e, d, action):
+    """The planner level's move: the landing rule may fly drone d instead of its FlyAgent's ``action``, then the
+    sensor (the fire map) looks around it."""
+    rules.drones.move_drone(e, d, rules.landing.action(e, d, action))
+    rules.sensor.observe_drone(e, rules.drones, d)
+
+
 @ti.data_oriented
-class GoalRules:
-    """What one group of drones does about goals and fires, for one level.
+class FlyRules:
+    """The FlyAgent's goal rules (docs/model/agents.md §7).
 
     Args:
         drones: the group.
-        candidates: :class:`BurningCells` or :class:`KnownFires`.
-        mode: ``REACH``, ``EXTINGUISH`` or ``DROP_ANYWHERE`` (module docstring).
-        water_policy: with ``EXTINGUISH`` and a finite tank, a drone whose drop emptied it flies home and
-            waits there until full (docs/model/agents.md §10.2, §14).
-        sticky: keep the ``extinguished`` flag set after the step it was raised in (the reference's defect;
-            the fix clears it every step, so Extinguish pays on the step water hits a fire only).
-        wake_idle: a drone heading for the groundstation takes the nearest candidate as soon as there is one
-            (the heuristic; a FlyAgent retries only when it arrives).
-        wake_reserved: with ``wake_idle``, also a drone whose goal is a fire on the groundstation's own cell (the
-            original: its goal's centre equals the groundstation's, so it re-takes that fire every step and never
-            reaches the drop; the heuristic times out whenever that cell burns). False is the fix: only a drone
-            without a reserved fire (``goal_cell < 0``) is idle.
-        sensor: an object whose ``observe_drone(e, drones, d)`` runs right after the move (the planner's fire
-            map), or None.
-        resources: with a battery (``drones.energy``), the resource-aware heuristic: a drone flies home once its
-            battery holds no more than (1 + ``energy_margin``) times what flying home takes plus what waiting there
-            for every other drone's turn takes (:meth:`roshan.kernels.battery.Battery.base_queue_energy`), or its
-            tank is empty, waits there until both are full, and then takes the nearest free fire (``DROP_ANYWHERE``:
-            it waits there for the planner's next goal).
-        queue: the reserve for the queue at the base (``planner.return_queue``): every other drone's turn
-            (``all``), the turns of the other drones flying home or waiting there now (``waiting``), or none
-            (``none``: landed drones swap side by side, so no drone waits for another's turn). With 16 drones and
-            the realistic battery, fifteen 120 s swaps at full power ask for more than a full battery, so with
-            ``all`` every drone would turn home as soon as it left.
-        land: with a battery, a drone that waits at the groundstation lands on its cell (:meth:`is_landed`) instead
-            of following the FlyAgent: the planner's level sets it for the planner and both heuristics alike.
+        candidates: :class:`BurningCells`.
+        extinguish: the complex policy: drop water at the goal and take the next fire; with the water limit, a drone
+            whose drop emptied its tank flies home and waits there until full (docs/model/agents.md §10.2, §14).
+            Otherwise the simple policy: reaching the goal is the objective.
+        sticky: keep the ``extinguished`` flag set after the step it was raised in (the reference's defect; the fix
+            clears it every step, so Extinguish pays on the step water hits a fire only).
     """
 
-    def __init__(self, drones, candidates, *, mode: int, water_policy: bool = False, sticky: bool = False,
-                 wake_idle: bool = False, wake_reserved: bool = True, sensor=None, resources: bool = False,
-                 energy_margin: float = 0.25, queue: str = "all", land: bool = False):
-        self.drones, self.candidates, self.mode = drones, candidates, mode
-        if queue not in ("all", "waiting", "none"):
-            raise ValueError(f"queue: expected all, waiting or none, got {queue!r}")
-        self.queue = queue
-        self.water_policy, self.sticky, self.wake_idle = water_policy, sticky, wake_idle
-        self.wake_reserved = wake_reserved
-        self.resources = resources and drones.use_energy
-        self.land = land and drones.use_energy
-        self.energy_margin = energy_margin
-        self.sensor = sensor
-        self.has_sensor = sensor is not None  # read in ti.static (no "is" in Taichi scope)
+    def __init__(self, drones, candidates, *, extinguish: bool, sticky: bool = False):
+        self.drones, self.candidates = drones, candidates
+        self.extinguish, self.sticky = extinguish, sticky
 
     @ti.func
     def retarget(self, e, d):
-        """Take the nearest free candidate (the groundstation if none is free)."""
-        take_cell(self.drones, e, d, nearest_free_cell(self.drones, self.candidates, e, d))
+        retarget(self.drones, self.candidates, e, d)
 
     @ti.func
     def drone_step(self, e, d, action) -> ti.i32:
-        """Move drone d, let the sensor see, apply the goal rules; 1 if it put out the map's last fire."""
-        a = action
-        if ti.static(self.land):
-            if self.is_landed(e, d) != 0:
-                a = self.drones.hold_action(e, d)
-            elif self.drones.landing.is_approaching(e, d) != 0:  # the last metres straight in, not by the FlyAgent
-                a = self.drones.straight_to_base(e, d)
-        self.drones.move_drone(e, d, a)
-        if ti.static(self.has_sensor):
-            self.sensor.observe_drone(e, self.drones, d)
-        last = 0
-        if self.drones.battery.is_lost(e, d) == 0:  # a lost drone follows no goal rule
-            last = self.handle_goal(e, d)
-        return last
+        """Move drone d and apply the goal rules; 1 if it put out the map's last fire."""
+        self.drones.move_drone(e, d, action)
+        return follow_goal(self, e, d)
 
     @ti.func
     def handle_goal(self, e, d) -> ti.i32:
         """docs/model/agents.md §7 at drone d's position; returns 1 if it put out the map's last fire."""
         dr = self.drones
         last = 0
-        if ti.static(self.mode == DROP_ANYWHERE):
-            if ti.static(self.resources):
-                self.watch_resources(e, d)
-            last = dr.extinguish_here(e, d)
-        else:
-            if ti.static(not self.sticky):
-                dr.extinguished[e, d] = 0
-            going_home = 0
-            if ti.static(self.water_policy):
-                going_home = dr.refilling[e, d]
-                if going_home != 0 and dr.water[e, d] >= dr.capacity:  # refilled in move_drone this step
-                    dr.refilling[e, d] = 0
-                    self.retarget(e, d)
-            if ti.static(self.resources):
-                going_home = self.watch_resources(e, d)
-            waking = 0
-            if ti.static(self.wake_idle):
-                idle = dr.heads_home(e, d)
-                if ti.static(not self.wake_reserved):
-                    idle = ti.cast(idle != 0 and dr.goal_cell[e, d] < 0, ti.i32)
-                if ti.static(self.resources):
-                    idle = ti.cast(idle != 0 and going_home == 0, ti.i32)  # a drone sent home stays there
-                waking = ti.cast(idle != 0 and self.candidates.any(e) != 0, ti.i32)
-            if waking != 0:
-                self.retarget(e, d)
-            elif going_home == 0 and dr.at_goal(e, d) != 0:
-                if ti.static(self.mode == EXTINGUISH):
-                    last = self.extinguish_at_goal(e, d)
-                else:
-                    dr.objective[e, d] = 1
+        if ti.static(not self.sticky):
+            dr.extinguished[e, d] = 0
+        refilling = dr.refilling[e, d]  # set by extinguish_at_goal only: an empty tank (complex, water limit)
+        if refilling != 0 and dr.water[e, d] >= dr.capacity:  # refilled in move_drone this step
+            dr.refilling[e, d] = 0
+            self.retarget(e, d)
+        if refilling == 0 and dr.at_goal(e, d) != 0:
+            if ti.static(self.extinguish):
+                last = self.extinguish_at_goal(e, d)
+            else:
+                dr.objective[e, d] = 1
         return last
 
     @ti.func
-    def queue_reserve(self, e, d) -> ti.f32:
-        """Joules drone d keeps for waiting its turn at the base (``queue``): every other drone's turn, the turns of
-        the drones flying home or waiting there now (an env's drones step one after another, so the count is the
-        same at any thread count), or none."""
-        dr = self.drones
-        reserve = dr.battery.queue_energy
-        if ti.static(self.queue == "none"):
-            reserve = 0.0
-        if ti.static(self.queue == "waiting"):
-            ahead = 0
-            for o in range(dr.num_drones):
-                if o != d and dr.refilling[e, o] != 0 and dr.battery.is_lost(e, o) == 0:
-                    ahead += 1
-            reserve = ahead * dr.battery.turn_energy
-        return reserve
-
-    @ti.func
-    def watch_resources(self, e, d) -> ti.i32:
-        """The resource-aware heuristic's rule (``resources``): 1 while drone d flies home or waits there."""
-        dr = self.drones
-        home = dr.refilling[e, d]
-        if home != 0 and dr.is_stocked(e, d) != 0:  # a full battery and tank again: back to the fires
-            dr.refilling[e, d] = 0
-            home = 0
-            if ti.static(self.mode != DROP_ANYWHERE):  # a planner drone waits there for its next goal
-                self.retarget(e, d)
-        elif home == 0:
-            need = (1.0 + self.energy_margin) * dr.battery.energy_home(e, d) + self.queue_reserve(e, d)
-            if dr.battery.is_low(e, d, need) != 0 or dr.has_water(e, d) == 0:
-                dr.refilling[e, d] = 1
-                home = 1
-                take_cell(dr, e, d, -1)  # its fire is free for the others
-        return home
-
-    @ti.func
-    def is_landed(self, e, d) -> ti.i32:
-        """Drone d waits at the groundstation (sent home until stocked, or there without a fire: the planner's
-        groundstation goal or an idle heuristic drone) and is on its cell: it stays put instead of following the
-        FlyAgent (``land``). Issue 33: hovering there, the collision-trained FlyAgent jostled the drones that waited
-        at once (and the ones lost beside the cell) off it and on again, so none stayed the swap's 3 s in a row; they
-        waited 100-170 s beside the base and came down there (26 of 64 drones in 16 endurance episodes of the aware
-        greedy)."""
-        dr = self.drones
-        waits = dr.refilling[e, d]
-        if waits == 0:
-            waits = ti.cast(dr.heads_home(e, d) != 0 and dr.goal_cell[e, d] < 0, ti.i32)
-        return ti.cast(waits != 0 and dr.at_groundstation(e, d) != 0, ti.i32)
-
-    @ti.func
     def extinguish_at_goal(self, e, d) -> ti.i32:
-        """Drop water here, release the reservation and take the next fire, or fly home with an empty tank."""
+        """Drop water here and take the next fire, or fly home if the tank is empty (only with the water limit)."""
         dr = self.drones
-        last = 0
-        if dr.extinguish_here(e, d) != 0:
-            dr.objective[e, d] = 1
-            last = 1
-        if ti.static(self.candidates.forgets):
-            if dr.extinguished[e, d] != 0:
-                self.candidates.forget(e, dr.cell_of(e, d))
-        dr.goal_cell[e, d] = -1
-        empty = 0
-        if ti.static(self.water_policy):
-            empty = 1 - dr.has_water(e, d)
-        if empty != 0:
+        last = drop_at_goal(dr, self.candidates, e, d)
+        if dr.has_water(e, d) == 0:
             dr.refilling[e, d] = 1
             dr.goal[e, d] = dr.groundstation_centre(e)
         else:
             self.retarget(e, d)
         return last
+
+
+@ti.data_oriented
+class GreedyRules:
+    """The greedy heuristic's goal rules (docs/model/agents.md §10.2): drop water at the goal and take the nearest
+    known fire; a drone heading for the groundstation takes one as soon as there is one (a FlyAgent retries only
+    when it arrives).
+
+    Args:
+        drones: the group.
+        candidates: :class:`KnownFires`.
+        sensor: the fire map: its ``observe_drone(e, drones, d)`` runs right after each move.
+        returns: the return rule (``ReturnWhenLow``: the resource-aware heuristic; ``NoReturn``). A drone it sends
+            home stays there until it is stocked, then takes the nearest free fire.
+        landing: the landing rule (``LandAtBase`` or ``NoLanding``).
+        wake_reserved: also wake a drone whose goal is a fire on the groundstation's own cell (the original: its
+            goal's centre equals the groundstation's, so it re-takes that fire every step and never reaches the drop;
+            the heuristic times out whenever that cell burns). False is the fix: only a drone without a reserved
+            fire (``goal_cell < 0``) is idle.
+    """
+
+    def __init__(self, drones, candidates, sensor, *, returns, landing, wake_reserved: bool = True):
+        self.drones, self.candidates, self.sensor = drones, candidates, sensor
+        self.returns, self.landing, self.wake_reserved = returns, landing, wake_reserved
+
+    @ti.func
+    def retarget(self, e, d):
+        retarget(self.drones, self.candidates, e, d)
+
+    @ti.func
+    def drone_step(self, e, d, action) -> ti.i32:
+        """Move drone d, let the sensor see, apply the goal rules; 1 if it put out the map's last fire."""
+        move_and_look(self, e, d, action)
+        return follow_goal(self, e, d)
+
+    @ti.func
+    def handle_goal(self, e, d) -> ti.i32:
+        dr = self.drones
+        last = 0
+        dr.extinguished[e, d] = 0
+        state = self.returns.watch(e, d)
+        if state == RESTOCKED:
+            self.retarget(e, d)
+        going_home = ti.cast(state == HOME, ti.i32)  # a drone sent home stays there
+        idle = dr.heads_home(e, d)
+        if ti.static(not self.wake_reserved):
+            idle = ti.cast(idle != 0 and dr.goal_cell[e, d] < 0, ti.i32)
+        if idle != 0 and going_home == 0 and self.candidates.any(e) != 0:
+            self.retarget(e, d)
+        elif going_home == 0 and dr.at_goal(e, d) != 0:
+            last = drop_at_goal(dr, self.candidates, e, d)
+            self.retarget(e, d)
+        return last
+
+
+@ti.data_oriented
+class PlannerDroneRules:
+    """The planner's drones: the planner picks their goals (:meth:`retarget` only for the first), and they drop water
+    on every burning cell they fly over (docs/model/agents.md §7).
+
+    Args:
+        drones: the group.
+        candidates: :class:`BurningCells` (the first goals).
+        sensor: the fire map: its ``observe_drone(e, drones, d)`` runs right after each move.
+        returns: the return rule (``ReturnWhenLow``, ``planner.planner_resources``, or ``NoReturn``): a drone it sends
+            home waits there for the planner's next goal once stocked.
+        landing: the landing rule (``LandAtBase`` or ``NoLanding``).
+    """
+
+    def __init__(self, drones, candidates, sensor, *, returns, landing):
+        self.drones, self.candidates, self.sensor = drones, candidates, sensor
+        self.returns, self.landing = returns, landing
+
+    @ti.func
+    def retarget(self, e, d):
+        retarget(self.drones, self.candidates, e, d)
+
+    @ti.func
+    def drone_step(self, e, d, action) -> ti.i32:
+        """Move drone d, let the sensor see, apply the goal rules; 1 if it put out the map's last fire."""
+        move_and_look(self, e, d, action)
+        return follow_goal(self, e, d)
+
+    @ti.func
+    def handle_goal(self, e, d) -> ti.i32:
+        self.returns.watch(e, d)
+        return self.drones.extinguish_here(e, d)

@@ -162,7 +162,9 @@ def test_the_memory_estimate_counts_the_batterys_fields_only_where_there_is_one(
     assert len(fields) == 6 and Battery.field_bytes(2, 1) == sum(4 * int(np.prod(f.shape)) for f in fields)
     plain = DroneSim(d.fire, DroneConfig(num_drones=1))
     assert isinstance(plain.battery, NoBattery) and vars(plain.battery) == {}
-    assert DroneSim.field_bytes(2, 1, battery=True) - DroneSim.field_bytes(2, 1) == Battery.field_bytes(2, 1)
+    with_battery = DroneConfig(num_drones=1, energy=EnergyConfig(preset="scenario"))
+    assert (DroneSim.field_bytes(2, with_battery) - DroneSim.field_bytes(2, DroneConfig(num_drones=1))
+            == Battery.field_bytes(2, 1))
 
 
 def test_a_swap_on_the_groundstation_restores_the_battery_after_the_set_time():
@@ -260,7 +262,7 @@ def test_a_drone_flying_home_within_the_approach_is_out_of_the_others_way(approa
 
 @ti.kernel
 def fly_final_approach(drones: ti.template(), steps: ti.i32):
-    """Drone 0 of env 0 flies ``steps`` steps by the final-approach command (GoalRules.drone_step's choice)."""
+    """Drone 0 of env 0 flies ``steps`` steps by the final-approach command (LandAtBase.action's choice)."""
     for _ in range(1):
         for _k in range(steps):
             drones.move_drone(0, 0, drones.straight_to_base(0, 0))
