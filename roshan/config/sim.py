@@ -4,6 +4,7 @@ import math
 from dataclasses import dataclass, field
 
 from roshan.config.schema import INT32_MAX, ConfigError, Section, choice, num
+from roshan.episode import EXTRA_COLUMNS, Column
 
 # Upper bounds of the pool sizes: a particle pool of 2^26 (1.3-2.1 GiB per env) serves a map of ~80 million cells
 # burning whole (the reference peaks at 0.4 convection and 0.8 radiation particles per cell), and 2^24 blocks hold
@@ -171,6 +172,17 @@ class DroneConfig(Section):
             return [f"drones.energy.approach = {self.energy.approach!r} does nothing while drones.energy.preset is "
                     "off: only a drone flying home to swap its battery makes the final approach"]
         return []
+
+    @property
+    def failures(self) -> tuple[str, ...]:
+        """The failures the drones bring to a level's (:data:`roshan.episode.REASONS`): "lost" with a battery."""
+        return ("lost",) if self.energy.enabled else ()
+
+    @property
+    def counted_columns(self) -> tuple[Column, ...]:
+        """The record's extra columns these drones count (:data:`roshan.episode.EXTRA_COLUMNS`, the battery's):
+        all of them with a battery, none without (they stay zero)."""
+        return EXTRA_COLUMNS if self.energy.enabled else ()
 
     def battery_reach(self) -> float | None:
         """Metres from the groundstation a full battery can take a drone and bring it back, at the speed that goes
