@@ -165,6 +165,17 @@ class DroneConfig(Section):
     recharge_time: float = num(2.0, 0.0, doc="seconds an empty tank takes to refill at the groundstation")
     energy: EnergyConfig = field(default_factory=EnergyConfig)
 
+    # The keys that shape a network seeing the whole fleet in one row (the planner's): the number of drones, and
+    # whether they carry a battery (a property of the section: with one the observation has an energy part whatever
+    # the preset, the charge being a fraction of a full battery, so a planner trained on `scenario` serves
+    # `realistic`).
+    FLEET_SHAPE_KEYS = ("drones.num_drones", "drones.energy.enabled")
+
+    def fleet_shape(self) -> dict:
+        """What such a network is built for, as those keys decide it: ``num_drones``, and ``resources``: each
+        drone's observation has an energy part."""
+        return {"num_drones": self.num_drones, "resources": self.energy.enabled}
+
     def inert(self) -> list[str]:
         """Settings that change nothing here, each as a warning line: set but silent, they read as if
         they had been applied."""
@@ -172,6 +183,13 @@ class DroneConfig(Section):
             return [f"drones.energy.approach = {self.energy.approach!r} does nothing while drones.energy.preset is "
                     "off: only a drone flying home to swap its battery makes the final approach"]
         return []
+
+    @property
+    def step_durations(self) -> dict[str, float]:
+        """Dotted key -> seconds of the durations the kernels count in steps of ``fire.dt`` (a tank's refill, a
+        battery swap), which the whole config checks against its step counters."""
+        return {"drones.recharge_time": self.recharge_time,
+                "drones.energy.swap_time": self.energy.values().get("swap_time", 0.0)}
 
     @property
     def failures(self) -> tuple[str, ...]:
