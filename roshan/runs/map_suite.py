@@ -4,8 +4,8 @@ Each map is one evaluation exactly as ``roshan eval RUN --set map.name=MAP`` mak
 same episodes, seed, baseline and overrides), written to its own folder ``DIR/<map>/``. ``DIR/maps.md`` and
 ``DIR/maps.json`` then hold one row per map: its size, each controller's success rate and median TTE, the mean of
 each extra column of the record that has a row in the tables (drones lost) where the drones counted it, and the
-ratio of the median TTEs. Every map is loaded and checked before the first
-evaluation starts, so a misspelt third map does not cost the first two evaluations.
+ratio of the median TTEs. Every map is loaded and checked before the first evaluation starts, so a misspelt third
+map does not cost the first two evaluations.
 """
 
 import json
