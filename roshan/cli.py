@@ -335,7 +335,7 @@ def eval_cmd(target, episodes, seed, envs, which, out_dir, json_path, replace, f
     refused unless --replace. Every summary JSON records the command, overrides, checkpoint and code version.
 
     --maps A,B,C evaluates on each map as --set map.name=MAP would, prints each map's table as it ends and then
-    one row per map (success, median TTE, drones lost with a battery, ratio of the median TTEs).
+    one row per map (success, median TTE, drones lost where drones can come down, ratio of the median TTEs).
     """
     if maps is not None:
         single = [name for name, value in (("--frames", frames_dir), ("--gif", gif_path), ("--json", json_path),

@@ -18,8 +18,8 @@ def fly_ppo(cfg: PPOConfig, collision: bool, frames: int = 3, device: str | torc
 
 def planner_ppo(cfg: PPOConfig, planner: PlannerConfig, num_drones: int, device: str | torch.device = "cpu",
                 rnd: RNDConfig | None = None, resources: bool = False) -> PPO:
-    """PPO over the planner network ``planner`` (the section) describes; ``resources``: the drones have a battery
-    (``drones.energy``), which the network reads."""
+    """PPO over the planner network ``planner`` (the section) describes for ``num_drones`` drones; ``resources``:
+    their observation has its resource parts (both from :meth:`roshan.config.sim.DroneConfig.fleet_shape`)."""
     return PPO(cfg, PlannerPolicy(planner, num_drones, resources), device, rnd)
 
 
@@ -36,8 +36,8 @@ def make_agent(cfg: Config, device: str | torch.device = "cpu", seed: int | None
 
 AGENTS = {
     "ppo": lambda cfg, device: fly_ppo(cfg.ppo, cfg.fly.collision, cfg.fly.frames, device, cfg.rnd),
-    "planner": lambda cfg, device: planner_ppo(cfg.ppo, cfg.planner, cfg.drones.num_drones, device, cfg.rnd,
-                                               cfg.drones.energy.enabled),
+    "planner": lambda cfg, device: planner_ppo(cfg.ppo, cfg.planner, device=device, rnd=cfg.rnd,
+                                               **cfg.drones.fleet_shape()),
     "td3": lambda cfg, device: TD3(cfg.td3, cfg.fly.collision, cfg.fly.frames, device),
     "iql": lambda cfg, device: IQL(cfg.iql, cfg.fly.collision, cfg.fly.frames, device),
 }

@@ -37,6 +37,20 @@ def trim_candidates(obs: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
     return out
 
 
+def fleet_features(obs: dict[str, torch.Tensor]) -> torch.Tensor:
+    """Drone positions, goals, water (and energy, with a battery) with the global fire context, flat: (B, 5 N + 5),
+    or (B, 7 N + 5) with energy (:func:`fleet_features_dim`). The candidate list has no fixed length, so it enters
+    only through the globals (count, centroid, wind). What RND reads at the planner level."""
+    energy = [obs["energy"].flatten(1)] if "energy" in obs else []
+    return torch.cat([obs["drones"].flatten(1), obs["goals"].flatten(1), obs["water"].flatten(1), *energy,
+                      obs["globals"]], dim=-1)
+
+
+def fleet_features_dim(num_drones: int, resources: bool) -> int:
+    """The width of :func:`fleet_features` for ``num_drones`` drones; ``resources``: with the energy part."""
+    return (7 if resources else 5) * num_drones + 5
+
+
 def candidate_validity(fires_mask: torch.Tensor) -> torch.Tensor:
     """(B, K) bool, True = selectable; the groundstation (index 0) is always valid."""
     valid = fires_mask > 0

@@ -22,7 +22,7 @@ from torch.nn import functional as F
 from roshan.algos.distributions import ClippedGaussian, TanhNormal
 from roshan.algos.frames import FrameCache, NoCache, gather_stacks
 from roshan.algos.networks import ActorCritic
-from roshan.algos.planner_nets import PLANNER_NETS, trim_candidates
+from roshan.algos.planner_nets import PLANNER_NETS, fleet_features, fleet_features_dim, trim_candidates
 from roshan.config import PlannerConfig, PPOConfig
 
 AGENT_FEATURES = 9  # per frame of a FlyAgent's own observation (roshan.algos.networks)
@@ -170,21 +170,15 @@ class PlannerPolicy:
     shares_encoder = True
 
     def __init__(self, planner: PlannerConfig, num_drones: int, resources: bool = False):
-        """``planner``: the section (network, temperature, distance_prior, distinct_goals); ``resources``: the drones
-        carry a battery, which the network reads."""
+        """``planner``: the section (network, temperature, distance_prior, distinct_goals); ``resources``: the
+        drones' observation has its resource parts, which the network reads (:mod:`roshan.algos.planner_nets`)."""
         # the pointer nets always decode distinct goals; the thesis net on request (planner.distinct_goals)
         distinct = {"distinct_goals": planner.distinct_goals} if planner.network == "thesis" else {}
         self.net = PLANNER_NETS[planner.network](num_drones, temperature=planner.temperature, resources=resources,
                                                  distance_prior=planner.distance_prior, **distinct)
-        self.novelty_dim = (7 if resources else 5) * num_drones + 5
+        self.novelty_dim = fleet_features_dim(num_drones, resources)
 
-    @staticmethod
-    def novelty_features(obs: dict[str, torch.Tensor]) -> torch.Tensor:
-        """Drone positions, goals, water (and energy) with the global fire context (B, 5 N + 5, or 7 N + 5): the
-        candidate list has no fixed length, so it enters only through the globals (count, centroid, wind)."""
-        energy = [obs["energy"].flatten(1)] if "energy" in obs else []
-        return torch.cat([obs["drones"].flatten(1), obs["goals"].flatten(1), obs["water"].flatten(1), *energy,
-                          obs["globals"]], dim=-1)
+    novelty_features = staticmethod(fleet_features)
 
     def critic_parameters(self) -> list[nn.Parameter]:
         return self.net.critic_parameters()

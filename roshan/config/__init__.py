@@ -93,11 +93,9 @@ schema.register_tree(Config)  # errors of a section built in Python name its dot
 
 
 def check_step_counts(cfg: Config) -> None:
-    """Durations the kernels count in steps of ``fire.dt`` (a battery swap, a tank's refill) must fit their int32
-    counters: ``swap_time=1e9`` used to end in Taichi's "Integer literal ... exceeded the range"."""
-    durations = {"drones.recharge_time": cfg.drones.recharge_time,
-                 "drones.energy.swap_time": cfg.drones.energy.values().get("swap_time", 0.0)}
-    for key, seconds in durations.items():
+    """Durations the kernels count in steps of ``fire.dt`` (:attr:`DroneConfig.step_durations`) must fit their
+    int32 counters: ``swap_time=1e9`` used to end in Taichi's "Integer literal ... exceeded the range"."""
+    for key, seconds in cfg.drones.step_durations.items():
         steps = (seconds + 1e-4) / cfg.fire.dt
         if steps > schema.INT32_MAX:
             most = schema.INT32_MAX * cfg.fire.dt

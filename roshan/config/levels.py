@@ -14,6 +14,8 @@ builds, one per level, picked by name in ``roshan/runs/levels.py``. No module as
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from roshan.config.sim import DroneConfig
+
 # The planner networks without drone ids: one set of weights flies any number of drones, so the fleet size
 # (FLEET_SIZE) is not a model key of theirs (roshan/algos/planner_nets.py: FleetPlannerNet; a test keeps the two
 # lists in step).
@@ -56,10 +58,7 @@ class Level:
 
 FLY_AGENT = Level("FlyAgent", shape_keys=("fly.collision", "fly.frames"), section_shape_keys=("share_encoder",),
                   frozen_models=(), refused_keys=(), fights_fire=_fights_fire_by_policy)
-# drones.energy.enabled (a property of the section): with a battery the observation has an energy part, whatever
-# the preset (the charge is a fraction of a full battery), so a planner trained on `scenario` serves `realistic`.
-PLANNER = Level("planner", shape_keys=("planner.network", "drones.num_drones", "drones.energy.enabled",
-                                      "planner.distance_prior"),
+PLANNER = Level("planner", shape_keys=("planner.network", *DroneConfig.FLEET_SHAPE_KEYS, "planner.distance_prior"),
                 section_shape_keys=(), frozen_models=("planner.fly_model", "planner.explorer_model"),
                 refused_keys=tuple(f"ppo.{k}" for k in FLY_ONLY_PPO_KEYS), fights_fire=_always,
                 training_note="Training episodes (Episodes/*) sample goals from the stochastic policy with the "

@@ -4,6 +4,7 @@ import math
 from dataclasses import dataclass, field
 
 from roshan.config.schema import INT32_MAX, ConfigError, Section, choice, num
+from roshan.episode import EXTRA_COLUMNS, Column
 
 # Upper bounds of the pool sizes: a particle pool of 2^26 (1.3-2.1 GiB per env) serves a map of ~80 million cells
 # burning whole (the reference peaks at 0.4 convection and 0.8 radiation particles per cell), and 2^24 blocks hold
@@ -165,6 +166,17 @@ class DroneConfig(Section):
     recharge_time: float = num(2.0, 0.0, doc="seconds an empty tank takes to refill at the groundstation")
     energy: EnergyConfig = field(default_factory=EnergyConfig)
 
+    # The keys that shape a network seeing the whole fleet in one row (the planner's): the number of drones, and
+    # whether they carry a battery (a property of the section: with one the observation has an energy part whatever
+    # the preset, the charge being a fraction of a full battery, so a planner trained on `scenario` serves
+    # `realistic`).
+    FLEET_SHAPE_KEYS = ("drones.num_drones", "drones.energy.enabled")
+
+    def fleet_shape(self) -> dict:
+        """What such a network is built for, as those keys decide it: ``num_drones``, and ``resources``: each
+        drone's observation has an energy part."""
+        return {"num_drones": self.num_drones, "resources": self.energy.enabled}
+
     def inert(self) -> list[str]:
         """Settings that change nothing here, each as a warning line: set but silent, they read as if
         they had been applied."""
@@ -173,6 +185,24 @@ class DroneConfig(Section):
             return [f"drones.energy.approach = {self.energy.approach!r} does nothing while drones.energy.preset is "
                     "off: only a drone flying home to swap its battery makes the final approach"]
         return []
+
+    @property
+    def step_durations(self) -> dict[str, float]:
+        """Dotted key -> seconds of the durations the kernels count in steps of ``fire.dt`` (a tank's refill, a
+        battery swap), which the whole config checks against its step counters."""
+        return {"drones.recharge_time": self.recharge_time,
+                "drones.energy.swap_time": self.energy.values().get("swap_time", 0.0)}
+
+    @property
+    def failures(self) -> tuple[str, ...]:
+        """The failures the drones bring to a level's (:data:`roshan.episode.REASONS`): "lost" with a battery."""
+        return ("lost",) if self.energy.enabled else ()
+
+    @property
+    def counted_columns(self) -> tuple[Column, ...]:
+        """The record's extra columns these drones count (:data:`roshan.episode.EXTRA_COLUMNS`, the battery's):
+        all of them with a battery, none without (they stay zero)."""
+        return EXTRA_COLUMNS if self.energy.enabled else ()
 
     def battery_reach(self) -> float | None:
         """Metres from the groundstation a full battery can take a drone and bring it back, at the speed that goes

@@ -19,7 +19,7 @@ import torch
 from gymnasium.vector import AutoresetMode
 
 from roshan.config import Config
-from roshan.episode import ENERGY_FIELDS, EPISODE_FIELDS, FIRE_FIELDS, RECORD_FIELDS
+from roshan.episode import RECORD_FIELDS, RECORD_INFO, Column
 from roshan.kernels.pool import FlySims, PlannerSims
 from roshan.maps import LandCoverMap, check_drone_map, load_map
 from roshan.runtime import check_built_in_this_runtime, ensure_taichi, taichi_generation, torch_device
@@ -32,10 +32,10 @@ class VectorEnvCore(gym.vector.VectorEnv):
 
     Every call returns the same tensor objects: observation views into one buffer, rewards, terminations and
     truncations (E,) (a time-out truncates). ``info`` holds ``final_obs`` (the observation of envs that ended
-    this step, same layout), ``episode_stats`` (a dict of (E,) tensors, :data:`roshan.episode.EPISODE_FIELDS`),
-    ``episode_fire`` (the fire at the episode's end, :data:`roshan.episode.FIRE_FIELDS`), ``episode_energy`` (the
-    batteries, :data:`roshan.episode.ENERGY_FIELDS`; zero without ``drones.energy``) and ``_episode_stats``
-    (the (E,) bool mask of envs whose episode ended).
+    this step, same layout), the episode record as dicts of (E,) tensors (:data:`roshan.episode.RECORD_INFO`:
+    ``episode_stats``, ``episode_fire`` (the fire at the episode's end) and the extra columns the drones count,
+    zero where they count none, :attr:`extra_columns`) and ``_episode_stats`` (the (E,) bool mask of envs whose
+    episode ended).
 
     A subclass defines :meth:`_take_simulators` (its bundle from :mod:`roshan.kernels.pool`), calls
     :meth:`_allocate_buffers`, and defines :meth:`_views`, :meth:`_kernel_obs` and :meth:`_advance`.
@@ -103,8 +103,15 @@ class VectorEnvCore(gym.vector.VectorEnv):
 
     @property
     def failure_reasons(self) -> tuple[str, ...]:
-        """The failures an episode record can hold: the level's, and "lost" with a battery (drones.energy)."""
-        return self.level_failures + (("lost",) if self.drones.use_energy else ())
+        """The failures an episode record can hold: the level's and the drones'
+        (:attr:`roshan.config.sim.DroneConfig.failures`)."""
+        return self.level_failures + self.config.drones.failures
+
+    @property
+    def extra_columns(self) -> tuple[Column, ...]:
+        """The record's extra columns this env's drones count
+        (:attr:`roshan.config.sim.DroneConfig.counted_columns`)."""
+        return self.config.drones.counted_columns
 
     @property
     def max_env_steps(self) -> int:
@@ -134,11 +141,9 @@ class VectorEnvCore(gym.vector.VectorEnv):
         self._obs = self._views(self._obs_buf)
         done_bool = self._dones.view(torch.bool)
         self.terminations, self.truncations = done_bool[:, 0], done_bool[:, 1]
-        # "episode_stats", not "episode": gymnasium's RecordEpisodeStatistics writes info["episode"] itself.
         self._info = {"final_obs": self._views(self._final_buf),
-                      "episode_stats": {k: self._episode[:, i] for i, k in enumerate(EPISODE_FIELDS)},
-                      "episode_fire": {k: self._episode[:, RECORD_FIELDS.index(k)] for k in FIRE_FIELDS},
-                      "episode_energy": {k: self._episode[:, RECORD_FIELDS.index(k)] for k in ENERGY_FIELDS}}
+                      **{key: {k: self._episode[:, RECORD_FIELDS.index(k)] for k in fields}
+                         for key, fields in RECORD_INFO.items()}}
 
     def _batched_spaces(self) -> None:
         self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, self.num_envs)

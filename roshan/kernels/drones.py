@@ -417,3 +417,8 @@ class DroneSim:
                 if self.fire.burning_count(e) == 0:
                     last = 1
         return last
+
+    @ti.func
+    def record_totals(self, e):
+        """Env e's figures for the record's extra columns (:data:`roshan.episode.EXTRA_COLUMNS`, in order)."""
+        return self.battery.totals(e)

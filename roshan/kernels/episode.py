@@ -8,13 +8,12 @@ import taichi as ti
 
 from roshan.config import ConfigError
 from roshan.config.schema import INT32_MAX
-from roshan.episode import RECORD_FIELDS
+from roshan.episode import EXTRA_FIELDS, RECORD_FIELDS
 
 EP_SUCCESS, EP_REASON, EP_STEPS, EP_BURNED, EP_EXTINGUISHED, EP_RETURN, EP_BURNING, EP_LIT = (
     RECORD_FIELDS.index(k) for k in ("success", "reason", "steps", "burned_fraction", "extinguished", "return",
                                      "burning_fraction", "lit_fraction"))
-EP_LOST, EP_SWAPS, EP_ENERGY, EP_BASE_TIME = (
-    RECORD_FIELDS.index(k) for k in ("drones_lost", "battery_swaps", "energy_used", "base_time"))
+EP_EXTRA = RECORD_FIELDS.index(EXTRA_FIELDS[0])  # the extra columns follow one another from here
 
 
 @ti.func
@@ -32,13 +31,12 @@ def write_record(episode: ti.template(), fire: ti.template(), e, success, reason
 
 
 @ti.func
-def write_battery(episode: ti.template(), battery: ti.template(), e):
-    """Env e's battery columns (:meth:`roshan.kernels.battery.Battery.totals`; zero without a battery)."""
-    totals = battery.totals(e)
-    episode[e, EP_LOST] = totals[0]
-    episode[e, EP_SWAPS] = totals[1]
-    episode[e, EP_ENERGY] = totals[2]
-    episode[e, EP_BASE_TIME] = totals[3]
+def write_extra(episode: ti.template(), drones: ti.template(), e):
+    """Env e's extra columns (:data:`roshan.episode.EXTRA_COLUMNS`): what its drones counted over the episode
+    (:meth:`roshan.kernels.drones.DroneSim.record_totals`)."""
+    totals = drones.record_totals(e)
+    for k in ti.static(range(len(EXTRA_FIELDS))):
+        episode[e, EP_EXTRA + k] = totals[k]
 
 
 @ti.data_oriented
@@ -102,6 +100,6 @@ class EpisodeKernels:
     def close_episode(self, episode: ti.template(), dones: ti.template(), e, success, reason, truncated):
         """Write env e's record and done flags: truncated (a pure time-out) or terminated."""
         write_record(episode, self.fire, e, success, reason, self.steps[e], self.ret[e])
-        write_battery(episode, self.drones.battery, e)
+        write_extra(episode, self.drones, e)
         dones[e, 0] = ti.cast(1 - truncated, ti.u8)
         dones[e, 1] = ti.cast(truncated, ti.u8)

@@ -23,7 +23,7 @@ from roshan.algos.networks import flatten_drones
 from roshan.checkpoints import folder_lock, resolve_checkpoint
 from roshan.config import Config, Level, check_model_level
 from roshan.env.fly import FlyVectorEnv
-from roshan.episode import ENERGY_FIELDS, EPISODE_FIELDS, FIRE_FIELDS, REASONS, RECORD_FIELDS
+from roshan.episode import EXTRA_COLUMNS, REASONS, RECORD_FIELDS, RECORD_INFO
 from roshan.io import OutputError, prepare_output, refuse_overwrite, write_gif, writing
 from roshan.io import progress_bar as new_bar
 from roshan.runs.baselines import BASELINES
@@ -32,7 +32,7 @@ from roshan.runs.envs import caption_name, make_env
 from roshan.runs.levels import kit_of
 from roshan.runs.provenance import code_version, settings_hash
 from roshan.runs.report.files import write_episodes_csv, write_summary_json
-from roshan.runs.report.notes import controller_notes, reach_note
+from roshan.runs.report.notes import controller_notes, setting_notes
 from roshan.runs.report.plots import plot_comparison, plot_episodes, plot_learning_curves
 from roshan.runs.report.scalars import read_tensorboard_scalars
 from roshan.runs.report.stats import summarize
@@ -47,7 +47,8 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
 
     Returns a dict of arrays: reward (absent where the env's controller earns none, ``env.has_reward``), time
     (steps), success, reason (str), the fire at the end: burned (burned out), burning and lit (ever lit) as
-    fractions of the map's cells and extinguished (cells); env, index.
+    fractions of the map's cells and extinguished (cells); env, index; and the record's extra columns the env's
+    drones count (``env.extra_columns``: counts as ints).
     ``on_step(obs, actions, rewards, terms, truncs, info)`` is called after every step (buffer recording).
     With ``frames_dir`` the frames of env 0's first episode are written there: frame 0 is the state right after
     the reset and the last frame the episode's final state (which an env built with ``render_mode="rgb_array"``
@@ -89,9 +90,8 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
             _save_frame(env.final_frame if env_zero_ended else env.render(), frames_dir, frame)
             frame += 1
         if bool(ended.any()):
-            stats = torch.stack([info["episode_stats"][k] for k in EPISODE_FIELDS]
-                                + [info["episode_fire"][k] for k in FIRE_FIELDS]
-                                + [info["episode_energy"][k] for k in ENERGY_FIELDS], dim=-1).cpu().numpy()
+            stats = torch.stack([info[key][k] for key, fields in RECORD_INFO.items() for k in fields],
+                                dim=-1).cpu().numpy()  # (E, RECORD_FIELDS)
             for e in ended.nonzero().flatten().tolist():
                 if done_count[e] < quota:
                     rows[e].append(stats[e])
@@ -108,9 +108,8 @@ def run_episodes(env: FlyVectorEnv, act, episodes: int, seed: int, frames_dir: P
            "burning": col("burning_fraction"), "lit": col("lit_fraction"),
            "extinguished": col("extinguished").astype(int), "env": np.array([e for e, _, _ in kept]),
            "index": np.array([i for _, i, _ in kept])}
-    if env.drones.use_energy:  # the battery columns, per episode (drones lost and swaps as counts)
-        out.update({"drones_lost": col("drones_lost").astype(int), "battery_swaps": col("battery_swaps").astype(int),
-                    "energy_used": col("energy_used"), "base_time": col("base_time")})
+    for c in env.extra_columns:  # the extra columns the drones counted, per episode
+        out[c.name] = col(c.name).astype(int) if c.is_count else col(c.name)
     if not env.has_reward:
         del out["reward"]
     return out
@@ -310,15 +309,14 @@ def write_learning_curves(run_dir: Path, path: Path, title: str, level: Level, s
 def flyagent_json(summary: dict, reasons: tuple[str, ...] = ("collision", "boundary", "timeout")) -> dict:
     """The eval JSON: episodes, success_rate, failure_rates (one per failure the controller can have, its env's
     ``failure_reasons``: collision, boundary and timeout for a FlyAgent; timeout and burnout for a planner or its
-    greedy; lost with a battery), tte (steps); with a battery also drones_lost, battery_swaps, energy_used (J) and
-    base_time (s), means per episode."""
+    greedy; and the drones', ``DroneConfig.failures``), tte (steps), and the means per episode of the record's
+    extra columns the summary has (:data:`roshan.episode.EXTRA_COLUMNS`, by name)."""
     fr = summary["failure_rates"]
     keys = tuple(reasons)
     out = {"episodes": summary["episodes"], "success_rate": summary["success_rate"],
            "failure_rates": {k: fr.get(k, 0.0) for k in keys},
            "tte": {k: summary["tte"][k] for k in ("mean", "std", "median")}}
-    if "drones_lost" in summary:  # with a battery: means per episode
-        out.update({k: summary[k]["mean"] for k in ("drones_lost", "battery_swaps", "energy_used", "base_time")})
+    out.update({c.name: summary[c.name]["mean"] for c in EXTRA_COLUMNS if c.name in summary})
     return out
 
 
@@ -369,10 +367,9 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         env.close()
         say = _say if progress_bar else _quiet
         who, reasons, dt = f"{cfg.train.algo} policy", env.failure_reasons, cfg.fire.dt
-        reach = reach_note(cfg.drones.battery_reach(), env.drones.rows, env.drones.cols, env.drones.cell)
-        setting_notes = [reach] if reach else []
+        notes = setting_notes(cfg.drones, env.drones.rows, env.drones.cols, env.drones.cell)
         summary = write_outputs(eps, out, f"{run_dir.name} ({path.stem}, {len(eps['time'])} episodes, seed {seed})",
-                                provenance, reasons, dt, who, say, setting_notes)
+                                provenance, reasons, dt, who, say, notes)
         _note_simple_policy(cfg, summary, out)
         write_learning_curves(run_dir, out / "learning_curves.png", f"{run_dir.name}: {who}", cfg.train.level, say)
         payload = flyagent_json(summary, env.failure_reasons)
@@ -380,7 +377,7 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
             name, note, extras = kit.baseline_name(baseline, cfg)
             base = write_outputs(base_eps, out / baseline, f"{name} baseline ({len(base_eps['time'])} episodes, "
                                                              f"seed {seed})", provenance, reasons, dt,
-                               f"{name} baseline", say, setting_notes)
+                               f"{name} baseline", say, notes)
             plot_comparison({who: eps, baseline: base_eps}, out, reasons=reasons)
             payload = {"policy": payload, baseline: flyagent_json(base, env.failure_reasons)}
             summary["baseline"] = base

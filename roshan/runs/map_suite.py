@@ -2,9 +2,10 @@
 
 Each map is one evaluation exactly as ``roshan eval RUN --set map.name=MAP`` makes it (:func:`evaluate_run`:
 same episodes, seed, baseline and overrides), written to its own folder ``DIR/<map>/``. ``DIR/maps.md`` and
-``DIR/maps.json`` then hold one row per map: its size, each controller's success rate and median TTE, the drones
-lost with a battery, and the ratio of the median TTEs. Every map is loaded and checked before the first
-evaluation starts, so a misspelt third map does not cost the first two evaluations.
+``DIR/maps.json`` then hold one row per map: its size, each controller's success rate and median TTE, the mean of
+each extra column of the record that has a row in the tables (drones lost) where the drones counted it, and the
+ratio of the median TTEs. Every map is loaded and checked before the first evaluation starts, so a misspelt third
+map does not cost the first two evaluations.
 """
 
 import json
@@ -16,6 +17,7 @@ from tqdm import tqdm
 
 from roshan.checkpoints import config_of_checkpoint, load_checkpoint, resolve_checkpoint
 from roshan.config import Config, apply_overrides
+from roshan.episode import EXTRA_COLUMNS
 from roshan.io import OutputError, write_atomic, writing
 from roshan.maps import LandCoverMap, MapError, check_drone_map, load_map
 from roshan.runs.evaluate import default_checkpoint, eval_root, evaluate_run, evaluation_name, held_results, output_lock
@@ -86,14 +88,18 @@ def refuse_held_suite(out_dir: Path, names: Sequence[str]) -> None:
                                                     "--replace to overwrite them, or --out DIR to write a new folder")
 
 
+# The record's extra columns a suite shows, a mean per controller and map: those with a row in the tables.
+SUITE_COLUMNS = tuple(c for c in EXTRA_COLUMNS if c.label)
+
+
 def controller_figures(summary: dict) -> dict:
     """One controller's figures of a map's summary: success rate (with its Wilson interval), median TTE in steps
-    and seconds, and with a battery the mean drones lost per episode."""
+    and seconds, and the mean per episode of each extra column with a label (:data:`SUITE_COLUMNS`) the summary
+    has."""
     figures = {"success_rate": summary["success_rate"], "success_ci": list(summary["success_ci"]),
                "tte_median": summary["tte"]["median"],
                "tte_median_seconds": summary.get("tte_seconds", {}).get("median")}
-    if "drones_lost" in summary:
-        figures["drones_lost"] = summary["drones_lost"]["mean"]
+    figures.update({c.name: summary[c.name]["mean"] for c in SUITE_COLUMNS if c.name in summary})
     return figures
 
 
@@ -137,16 +143,16 @@ def _number(value: float | None, decimals: int = 1) -> str:
 
 
 def format_maps_table(rows: Sequence[dict], title: str) -> str:
-    """The suite as a Markdown table: one row per map; the baseline's columns where it played, drones lost where
-    the drones had a battery."""
+    """The suite as a Markdown table: one row per map; the baseline's columns where it played, each of
+    :data:`SUITE_COLUMNS` where the drones counted it on some map."""
     base = next((r["baseline"]["name"] for r in rows if "baseline" in r), None)
-    battery = any("drones_lost" in r["policy"] for r in rows)
+    counted = [c for c in SUITE_COLUMNS if any(c.name in r["policy"] for r in rows)]
     who = [("policy", "policy"), *([("baseline", base)] if base else [])]
     headers = ["Map", "Cells"]
     for _, label in who:
         headers += [f"{label} success", f"{label} median TTE (steps)"]
-    if battery:
-        headers += [f"{label} drones lost (mean)" for _, label in who]
+    for c in counted:
+        headers += [f"{label} {c.label.lower()} (mean)" for _, label in who]
     if base:
         headers.append(f"TTE ratio (policy / {base})")
     lines = [f"# {title}", "", "| " + " | ".join(headers) + " |",
@@ -155,8 +161,8 @@ def format_maps_table(rows: Sequence[dict], title: str) -> str:
         cells = [r["map"], f"{r['cells']:,} ({r['rows']} x {r['cols']})"]
         for key, _ in who:
             cells += [_pct(r[key]["success_rate"]), _number(r[key]["tte_median"])] if key in r else ["-", "-"]
-        if battery:
-            cells += [_number(r.get(key, {}).get("drones_lost"), 2) for key, _ in who]
+        for c in counted:
+            cells += [_number(r.get(key, {}).get(c.name), 2) for key, _ in who]
         if base:
             cells.append(r.get("tte_median_ratio_note") or _number(r.get("tte_median_ratio"), 2))
         lines.append("| " + " | ".join(cells) + " |")

@@ -31,8 +31,8 @@ def start_run(cfg: Config, root: str | Path = "runs", name: str | None = None) -
 
 
 def check_init_from(cfg: Config) -> None:
-    """Refuse ``train.init_from`` weights that cannot serve ``cfg`` (another level, network shape or battery) before
-    the run folder is made; the trainer loads them again when it starts."""
+    """Refuse ``train.init_from`` weights that cannot serve ``cfg`` (another level or network shape, the parts of
+    the observation it reads included) before the run folder is made; the trainer loads them again when it starts."""
     if not cfg.train.init_from:
         return
     path = resolve_checkpoint(cfg.train.init_from)

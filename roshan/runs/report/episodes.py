@@ -7,13 +7,10 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from roshan.episode import REASONS
-
-# With drones.energy: drones lost and battery swaps (counts), joules drawn, seconds landed at the groundstation.
-ENERGY_COLUMNS = ("drones_lost", "battery_swaps", "energy_used", "base_time")
+from roshan.episode import EXTRA_COLUMNS, EXTRA_FIELDS, REASONS
 
 # The reference's FailureReason names (docs/model/agents.md §2): the CSV uses them so files compare with the original's.
-# "lost" (a battery ran empty) is this project's: the original has no batteries.
+# "lost" is this project's (roshan.episode.REASONS): the original has no such failure.
 CSV_REASON_NAMES = {"none": "None", "timeout": "Timeout", "boundary": "BoundaryExit", "burnout": "Burnout",
                     "collision": "Collision", "lost": "DronesLost"}
 _REASON_ALIASES = {**{r: r for r in REASONS}, **{name.lower(): r for r, name in CSV_REASON_NAMES.items()}}
@@ -21,7 +18,7 @@ _REQUIRED = ("time", "success", "reason")
 # reward is optional: a controller that earns none (the greedy heuristic) has no reward column, so no table row
 # or plot pretends it scored 0. The fire at the end, as fractions of the map's cells: burned (burned out),
 # burning (still burning) and lit (ever lit: burning, burned out or extinguished); extinguished is a cell count.
-_OPTIONAL = ("reward", "burned", "burning", "lit", "extinguished", "seed", "episode", *ENERGY_COLUMNS)
+_OPTIONAL = ("reward", "burned", "burning", "lit", "extinguished", "seed", "episode", *EXTRA_FIELDS)
 FRACTIONS = ("burned", "burning", "lit")
 # Outcome categories in display order. "unspecified" is a failed episode whose reason is "none": the reference
 # takes the reason of the last terminal agent, which can be None although another agent failed
@@ -40,13 +37,13 @@ def validate_episodes(episodes: Mapping[str, Sequence]) -> dict[str, np.ndarray]
             of ``REASONS``; the reference names of ``CSV_REASON_NAMES`` are accepted too, any case), and
             optionally ``reward`` (float; absent for a controller that earns none), the fire at the end as
             fractions 0..1 of the map's cells ``burned`` (burned out), ``burning`` and ``lit`` (ever lit),
-            ``extinguished`` (int cells), ``seed`` and ``episode`` (int ids), and with a battery ``drones_lost``,
-            ``battery_swaps`` (int), ``energy_used`` (J) and ``base_time`` (s). Other keys are ignored.
+            ``extinguished`` (int cells), ``seed`` and ``episode`` (int ids), and the record's extra columns
+            (:data:`roshan.episode.EXTRA_COLUMNS`: counts or floats >= 0). Other keys are ignored.
 
     Returns:
         A new dict with those of the keys above that were given: float64 ``reward`` and fractions, int64
-        ``time``/``success``/``extinguished``/``seed``/``episode``, and ``reason`` as an array of the canonical
-        names in ``REASONS``.
+        ``time``/``success``/``extinguished``/``seed``/``episode`` and counts, and ``reason`` as an array of the
+        canonical names in ``REASONS``.
 
     Raises:
         ValueError: naming the key, for a missing key, an array that is not 1-D, arrays of different
@@ -75,8 +72,7 @@ def validate_episodes(episodes: Mapping[str, Sequence]) -> dict[str, np.ndarray]
     out["reason"] = _reason_column(cols["reason"], out["success"])
     readers = {"reward": _float_column, **dict.fromkeys(FRACTIONS, _fraction_column),
                "extinguished": _count_column, "seed": _int_column, "episode": _int_column,
-               "drones_lost": _count_column, "battery_swaps": _count_column, "energy_used": _nonnegative_column,
-               "base_time": _nonnegative_column}
+               **{c.name: _count_column if c.is_count else _nonnegative_column for c in EXTRA_COLUMNS}}
     out.update({key: read(cols, key) for key, read in readers.items() if key in cols})
     return out
 

@@ -11,23 +11,25 @@ from pathlib import Path
 
 import numpy as np
 
+from roshan.episode import EXTRA_COLUMNS
 from roshan.io import write_atomic
 from roshan.runs.report.episodes import CSV_REASON_NAMES, validate_episodes
 
 # Value columns: CSV name -> episode key, in file order (all but Time optional). Percent_Burned is the
-# reference's name for the burned-out fraction (0..1, not a percentage); the other fire columns follow it.
+# reference's name for the burned-out fraction (0..1, not a percentage); the other fire columns follow it, then
+# the record's extra columns under their headers.
 _VALUE_COLUMNS = (("Reward", "reward"), ("Time", "time"), ("Percent_Burned", "burned"),
                  ("Burning_Fraction", "burning"), ("Lit_Fraction", "lit"), ("Extinguished", "extinguished"),
-                 ("Drones_Lost", "drones_lost"), ("Battery_Swaps", "battery_swaps"), ("Energy_Used", "energy_used"),
-                 ("Base_Time", "base_time"))
+                 *((c.header, c.name) for c in EXTRA_COLUMNS))
 
 
 def write_episodes_csv(episodes: Mapping[str, Sequence], path: str | os.PathLike) -> Path:
     """Writes ``evaluation_stats.csv`` (docs/model/learning.md §12), atomically.
 
     Columns: ``Episode, [Reward], Time, [Percent_Burned, Burning_Fraction, Lit_Fraction, Extinguished],
-    [Drones_Lost, Battery_Swaps, Energy_Used, Base_Time], Success, Failure_Reason, [Seed]``, bracketed ones where
-    the episodes have them (no Reward for a controller that earns none; the battery columns with drones.energy).
+    [the extra columns' headers], Success, Failure_Reason, [Seed]``, bracketed ones where the episodes have them
+    (no Reward for a controller that earns none; the record's extra columns, :data:`roshan.episode.EXTRA_COLUMNS`,
+    where the drones counted them).
     Episode is the ``episode`` id if given, else 1..n; Failure_Reason uses the reference names
     (``CSV_REASON_NAMES``, "None" for successes). Floats are written with ``repr`` so that
     :func:`read_episodes_csv` gives them back exactly.

@@ -6,6 +6,8 @@ A note is one line; the tables print them under themselves, and a map suite list
 
 import math
 
+from roshan.config import DroneConfig
+
 
 def controller_notes(summary: dict, who: str) -> list[str]:
     """What makes ``who``'s :func:`~roshan.runs.report.stats.summarize` result meaningless: it put out no cell in
@@ -22,6 +24,13 @@ def controller_notes(summary: dict, who: str) -> list[str]:
         notes.append(f"{who} put out no cell in any of its {summary['episodes']} episodes{home}: its rates say "
                      "nothing about how it fights fire")
     return notes
+
+
+def setting_notes(drones: DroneConfig, rows: int, cols: int, cell: float) -> list[str]:
+    """The notes of an evaluation's setting, under every controller's table: :func:`reach_note` for ``drones`` on a
+    map of ``rows`` x ``cols`` cells of ``cell`` metres."""
+    reach = reach_note(drones.battery_reach(), rows, cols, cell)
+    return [reach] if reach else []
 
 
 def reach_note(reach: float | None, rows: int, cols: int, cell: float) -> str | None:

@@ -8,13 +8,8 @@ from statistics import NormalDist
 
 import numpy as np
 
-from roshan.runs.report.episodes import (
-    ALWAYS_REPORTED,
-    ENERGY_COLUMNS,
-    IF_PRESENT,
-    outcome_categories,
-    validate_episodes,
-)
+from roshan.episode import EXTRA_COLUMNS, EXTRA_FIELDS
+from roshan.runs.report.episodes import ALWAYS_REPORTED, IF_PRESENT, outcome_categories, validate_episodes
 
 
 def wilson_interval(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
@@ -157,7 +152,7 @@ def summarize(episodes: Mapping[str, Sequence], confidence: float = 0.95, reason
     Returns:
         ``{"episodes": n, "success_rate", "success_ci": [lo, hi] (Wilson), "failure_rates": {reason: rate},
         "tte", "tte_success", ["tte_seconds"], ["reward"], ["burned", "burning", "lit", "extinguished"],
-        [ENERGY_COLUMNS: with a battery]}``;
+        [the record's extra columns, by name: where the episodes have them]}``;
         rates are fractions of all n episodes, each statistics entry is :func:`describe` (``tte_success`` over
         successful episodes only), fire fractions are fractions of the map's cells, extinguished a cell count.
         A column the episodes lack (the greedy heuristic's reward) has no entry.
@@ -178,27 +173,23 @@ def summarize(episodes: Mapping[str, Sequence], confidence: float = 0.95, reason
     if dt is not None:
         summary["step_seconds"] = float(dt)
         summary["tte_seconds"] = describe(ep["time"] * float(dt), confidence)
-    for key in ("reward", "burned", "burning", "lit", "extinguished", *ENERGY_COLUMNS):
+    for key in ("reward", "burned", "burning", "lit", "extinguished", *EXTRA_FIELDS):
         if key in ep:
             summary[key] = describe(ep[key], confidence)
     return summary
 
 
-# with a battery (issue 33): per-episode drones lost, battery swaps, joules drawn and seconds at the groundstation
-BATTERY_TAGS = {"drones_lost": "Drones_Lost", "battery_swaps": "Battery_Swaps", "energy_used": "Energy_Used",
-                "base_time": "Base_Time"}
-
-
 def evaluation_scalars(summary: dict) -> dict[str, float]:
     """The ``Evaluation/*`` TensorBoard scalars of docs/model/learning.md §11 from a :func:`summarize` result, plus the
-    rate of each failure reason (``Evaluation/<Reason>_rate``) and, with a battery, the battery figures."""
+    rate of each failure reason (``Evaluation/<Reason>_rate``) and the record's extra columns the summary has
+    (tagged by their ``header``, :data:`roshan.episode.EXTRA_COLUMNS`)."""
     scalars = {"Evaluation/Success_rate": summary["success_rate"],
                "Evaluation/Success_ci_low": summary["success_ci"][0],
                "Evaluation/Success_ci_high": summary["success_ci"][1], "Evaluation/Success_n": summary["episodes"]}
     for reason, rate in summary["failure_rates"].items():
         scalars[f"Evaluation/{reason.capitalize()}_rate"] = rate
     for key, name in (("reward", "Reward"), ("tte", "Time"), ("burned", "Percent_Burned"), ("lit", "Ever_Lit"),
-                      *((key, BATTERY_TAGS[key]) for key in ENERGY_COLUMNS)):
+                      *((c.name, c.header) for c in EXTRA_COLUMNS)):
         if key in summary:
             s = summary[key]
             scalars.update({f"Evaluation/{name}_mean": s["mean"], f"Evaluation/{name}_std": s["std"],

@@ -7,6 +7,7 @@ in every label (TTE in steps and seconds, the fire in % of the map's cells, exti
 
 from collections.abc import Mapping
 
+from roshan.episode import EXTRA_COLUMNS
 from roshan.runs.report.episodes import LABELS
 
 # Fire rows: summary key -> (label, scale, unit, decimals).
@@ -40,8 +41,9 @@ def _row_values(summary: dict) -> dict[str, str]:
             "Success rate": f"{_pct(summary['success_rate'])} [{100 * lo:.1f}, {100 * hi:.1f}]"}
     for reason, rate in summary["failure_rates"].items():
         rows[_rate_label(reason)] = _pct(rate)
-    if "drones_lost" in summary:  # with a battery: 50 of 64 drones down reads 0.0 % in the rate above
-        rows["Drones lost (per episode)"] = _mean_std_median(summary["drones_lost"], 2)
+    for c in EXTRA_COLUMNS:  # the extra columns with a row, where counted
+        if c.label and c.name in summary:
+            rows[f"{c.label} (per episode)"] = _mean_std_median(summary[c.name], 2)
     rows["TTE (steps)"] = _mean_std_median(summary["tte"], 1)
     if "tte_seconds" in summary:
         rows["TTE (s)"] = _mean_std_median(summary["tte_seconds"], 1)

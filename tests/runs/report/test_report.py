@@ -259,6 +259,23 @@ def test_csv_of_a_controller_without_reward_and_with_the_fire_columns(tmp_path):
     assert report.summarize(back) == report.summarize(eps)
 
 
+def test_csv_with_the_battery_columns_keeps_their_headers_and_types(tmp_path):
+    # the record's extra columns (roshan.episode.EXTRA_COLUMNS) under the headers users' files have
+    eps = ten_episodes(drones_lost=[0, 1] * 5, battery_swaps=[3] * 10, energy_used=[0.1 + 0.2] * 10,
+                       base_time=[12.5] * 10)
+    lines = report.write_episodes_csv(eps, tmp_path / "e.csv").read_text().splitlines()
+    assert lines[0] == ("Episode,Reward,Time,Drones_Lost,Battery_Swaps,Energy_Used,Base_Time,Success,"
+                        "Failure_Reason")
+    assert lines[2] == "2,1.0,20,1,3,0.30000000000000004,12.5,1,None"
+    back = report.read_episodes_csv(tmp_path / "e.csv")
+    assert back["drones_lost"].dtype == np.int64 and back["energy_used"].dtype == np.float64
+    assert report.summarize(back) == report.summarize(eps)
+    with pytest.raises(ValueError, match=r"episodes\['battery_swaps'\] must hold integers"):
+        report.validate_episodes(ten_episodes(battery_swaps=[0.5] * 10))
+    with pytest.raises(ValueError, match=r"episodes\['base_time'\] must be finite and within \[0.0, inf\]"):
+        report.validate_episodes(ten_episodes(base_time=[-1.0] * 10))
+
+
 def test_csv_reader_names_the_missing_column_and_bad_value(tmp_path):
     path = tmp_path / "stats.csv"
     path.write_text("Episode,Reward,Time,Success\n1,0.5,10,1\n")
