@@ -24,8 +24,7 @@ from pathlib import Path
 
 import torch
 
-from roshan.config import Config, ConfigError, from_dict, to_dict, upgrade_agent_state
-from roshan.config.upgrade import upgrade_saved_config
+from roshan.config import Config, ConfigError, from_dict, to_dict, upgrade_agent_state, upgrade_saved_config
 from roshan.io import atomic_file, inside, prepare_output, writing
 
 CHECKPOINTS = ("latest", "best_reward", "best_objective", "best_eval")
@@ -135,7 +134,7 @@ def load_checkpoint(path: str | Path) -> dict:
 
 def upgrade_checkpoint(state: dict) -> dict:
     """A checkpoint of an earlier version in the current layout: the config dict through
-    :func:`roshan.config.upgrade.upgrade_saved_config`, and the planner PPO's single ``optimizer`` /
+    :func:`roshan.config.upgrade_saved_config`, and the planner PPO's single ``optimizer`` /
     ``scheduler`` as the lists of the one PPO class (the network weights are untouched)."""
     state = {**state, "config": upgrade_saved_config(state["config"])}
     if "agent" in state:

@@ -57,8 +57,7 @@ def fly() -> str:
     cfg = Config(ignition=IgnitionConfig(fire_percentage=0.05),
                  drones=DroneConfig(num_drones=3, use_water_limit=True, water_capacity=2.0,
                                     groundstation_start_percentage=0.5,
-                                    energy=EnergyConfig(preset="scenario", capacity=900.0, swap_time=1.0,
-                                                        approach=0.0)))
+                                    energy=EnergyConfig(preset="scenario", capacity=900.0, swap_time=1.0)))
     env = FlyVectorEnv(num_envs=4, config=cfg, fly=FlyConfig(policy="complex", collision=True), seed=5)
     g = torch.Generator().manual_seed(1)
     frames = EnvZeroFrames(env.drones)

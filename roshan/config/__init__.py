@@ -60,7 +60,7 @@ from roshan.config.sim import (
     SimConfig,
     WindConfig,
 )
-from roshan.config.upgrade import MOVED_KEYS, upgrade_agent_state, upgrade_config_dict
+from roshan.config.upgrade import MOVED_KEYS, fill_values_of_record, upgrade_agent_state, upgrade_config_dict
 
 
 @dataclass(frozen=True)
@@ -157,6 +157,12 @@ def show_keys(section: str = "") -> str:
 load_run_config = load_config
 
 
+def upgrade_saved_config(data: dict) -> dict:
+    """A checkpoint's config dict in the current layout (:func:`upgrade_config_dict`), with the value of record of
+    each key it predates (a field's ``was=``)."""
+    return fill_values_of_record(upgrade_config_dict(data), schema.values_of_record(Config))
+
+
 __all__ = [
     "ALGO_LEVELS", "ANY_FLEET_NETWORKS", "CONTROLLERS", "FLY_AGENT", "Level", "PLANNER", "PLANNER_NEWEST_TERMS",
     "PLANNER_PRESETS",
@@ -168,4 +174,5 @@ __all__ = [
     "apply_overrides", "check_model_level", "choice", "dump_config", "from_dict", "load_config", "load_run_config",
     "num", "replace",
     "level_of", "show_keys", "suggest", "to_dict", "upgrade_agent_state", "upgrade_config_dict",
+    "upgrade_saved_config",
 ]

@@ -116,7 +116,7 @@ class PlannerConfig(Section):
     eval_fires: str = choice("detected", ("true", "detected"), doc="candidates in evaluation")
     time_limit: str = choice("newest", ("newest", "thesis"))  # T_max formulas of docs/model/agents.md §5
     burnout: float = num(0.30, 0.0, 1.0, doc="burned-out fraction that fails the episode")
-    greedy_home: str = choice("fixed", ("original", "fixed"),
+    greedy_home: str = choice("fixed", ("original", "fixed"), was="original",
                               doc="greedy heuristic: fixed = a drone whose fire is on the groundstation cell drops "
                                   "on it; original = it re-takes that fire every step and never drops, the "
                                   "original's defect (docs/model/agents.md §10.2; the thesis configs keep it)")
@@ -124,7 +124,7 @@ class PlannerConfig(Section):
     greedy_energy_margin: float = num(0.25, 0.0, doc="resource-aware greedy: a drone flies home once its battery "
                                                     "holds at most (1 + margin) x the energy of the flight home, "
                                                     "plus the energy of waiting there for every other drone's turn")
-    return_queue: str = choice("waiting", ("waiting", "all", "none"),
+    return_queue: str = choice("waiting", ("waiting", "all", "none"), was="all",
                                doc="the return rule's reserve for waiting at the base: the turns of the drones "
                                    "flying home or waiting there now (waiting), every other drone's turn, the worst "
                                    "case, which with many drones is more than a battery holds (all), or none "

@@ -17,7 +17,7 @@ import numbers
 import types
 import typing
 from collections.abc import Callable
-from dataclasses import field
+from dataclasses import MISSING, field
 from pathlib import Path
 from typing import Any
 
@@ -38,18 +38,36 @@ INT32_MAX = 2**31 - 1
 
 
 def _range(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False, hi_open: bool = False,
-           choices: tuple | None = None, doc: str = "") -> dict:
-    return {"lo": lo, "hi": hi, "lo_open": lo_open, "hi_open": hi_open, "choices": choices, "doc": doc}
+           choices: tuple | None = None, doc: str = "", was=MISSING) -> dict:
+    meta = {"lo": lo, "hi": hi, "lo_open": lo_open, "hi_open": hi_open, "choices": choices, "doc": doc}
+    if was is not MISSING:
+        meta["was"] = was
+    return meta
 
 
-def num(default, lo=None, hi=None, *, lo_open=False, hi_open=False, doc=""):
+# ``was``: the field's default before it changed (the value of record, :func:`values_of_record`).
+def num(default, lo=None, hi=None, *, lo_open=False, hi_open=False, doc="", was=MISSING):
     """A numeric field with an allowed range (closed unless ``*_open``)."""
-    return field(default=default, metadata=_range(lo, hi, lo_open=lo_open, hi_open=hi_open, doc=doc))
+    return field(default=default, metadata=_range(lo, hi, lo_open=lo_open, hi_open=hi_open, doc=doc, was=was))
 
 
-def choice(default, choices: tuple, doc=""):
+def choice(default, choices: tuple, doc="", was=MISSING):
     """A field whose value must be one of ``choices``."""
-    return field(default=default, metadata=_range(choices=choices, doc=doc))
+    return field(default=default, metadata=_range(choices=choices, doc=doc, was=was))
+
+
+@functools.cache
+def values_of_record(cls: type, prefix: str = "") -> dict[str, Any]:
+    """Dotted key -> the default it had before it changed (``was=``), for every such field of the tree ``cls``: what
+    a run saved before the change did where it left the key to its default or predates it."""
+    out = {}
+    for f in dataclasses.fields(cls):
+        hint = _hints(cls)[f.name]
+        if dataclasses.is_dataclass(hint):
+            out.update(values_of_record(hint, f"{prefix}{f.name}."))
+        elif "was" in (f.metadata or {}):
+            out[prefix + f.name] = f.metadata["was"]
+    return out
 
 
 class Section:

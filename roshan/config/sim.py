@@ -122,11 +122,12 @@ class EnergyConfig(Section):
     payload_power: float | None = num(None, 0.0, doc="extra power with a full tank (W), scaled by the tank's fill "
                                                      "with the water limit (else always full)")
     swap_time: float | None = num(None, 0.0, doc="seconds on the groundstation cell to swap in a full battery")
-    approach: float = num(2.0, 0.0, doc="cells from the groundstation's centre within which a drone flying home "
-                                        "(with the landing rule of the planner level) flies the final approach "
-                                        "straight in, out of the others' way: like a landed drone it neither sees "
-                                        "nor is seen by them, nor the map's edge (0: none, the FlyAgent flies it "
-                                        "up to the cell, where drones arriving together can keep each other off it)")
+    approach: float = num(2.0, 0.0, was=0.0,
+                          doc="cells from the groundstation's centre within which a drone flying home (with the "
+                              "landing rule of the planner level) flies the final approach straight in, out of the "
+                              "others' way: like a landed drone it neither sees nor is seen by them, nor the map's "
+                              "edge (0: none, the FlyAgent flies it up to the cell, where drones arriving together "
+                              "can keep each other off it)")
 
     def __post_init__(self):
         super().__post_init__()

@@ -3,7 +3,7 @@ an old run folder (``--resume``) and the config stored in an old checkpoint (the
 
 - Until PPO became one class for both levels, the planner's PPO had its own section ``planner_ppo`` (the same keys
 as ``ppo`` without the FlyAgent-only ones, plus ``network``, other defaults) and ignored ``ppo``.
-- Keys added after runs were saved whose default is not what those runs did (:data:`ADDED_KEYS`): a checkpoint's
+- Keys added after runs were saved whose default is not what those runs did (a field's ``was=``): a checkpoint's
   config is complete, so one without such a key was saved before the key existed and keeps the behaviour it had.
 - Until the config tree became one, training took its batch and seed from ``train.num_envs`` / ``train.seed``
   and silently ignored ``sim.envs`` / ``sim.seed``, which ``roshan simulate`` and the envs read. Now every
@@ -21,16 +21,11 @@ OLD_PLANNER_PPO_DEFAULTS = {"lr": 1e-4, "horizon": 4800, "batch_size": 1200, "ga
                             "value_loss_coef": 0.001, "entropy_coeff": 0.0005}
 
 
-# Key -> the behaviour of runs saved before it existed, where today's default differs: the return rule reserved every
-# other drone's turn, and a drone flying home flew the FlyAgent up to the base's cell.
-ADDED_KEYS = {"planner.return_queue": "all", "drones.energy.approach": 0.0}
-
-
-def upgrade_saved_config(data: dict) -> dict:
-    """A checkpoint's (complete) config dict in the current layout (:func:`upgrade_config_dict`), with the value of
-    each of :data:`ADDED_KEYS` it predates."""
-    data = upgrade_config_dict(data)
-    for dotted, then in ADDED_KEYS.items():
+def fill_values_of_record(data: dict, record: dict) -> dict:
+    """A checkpoint's (complete) config dict with the value of record (``record``: dotted key -> the default it had
+    before it changed, :func:`roshan.config.schema.values_of_record`) of each key it lacks: it was saved before the
+    key existed, and its run did what that value does. A section it lacks stays absent."""
+    for dotted, then in record.items():
         *sections, key = dotted.split(".")
         node = data
         for s in sections:

@@ -52,7 +52,7 @@ from roshan.algos.frozen import fly_model_path
 from roshan.checkpoints import resolve_checkpoint
 from roshan.config import Config, apply_overrides, load_config
 from roshan.config.profiles import profile_values
-from roshan.config.schema import to_dict
+from roshan.config.schema import to_dict, values_of_record
 from roshan.experiment.findings import Finding, parse_findings
 
 CONTROLLERS = ("policy", "greedy")
@@ -234,14 +234,14 @@ class Spec:
         return {r.key: r.fingerprint() for r in self.runs()}
 
 
-# Defaults that changed after runs were recorded, with the value they had then. A run that leaves such a key to
-# its default is fingerprinted with the value of record, and every run's config is compared with these: so a
-# changed default neither makes a stored run look changed (every FlyAgent run holds a planner section) nor hides a
-# real difference (a run that set the new default's value explicitly was already non-default then). The one case
-# it cannot tell apart: a condition that relies on the default and ran both before and after the change; give
-# such a condition the key explicitly (configs/thesis/planner.yaml sets planner.greedy_home, configs/endurance.yaml
-# the return rule's reserve and the final approach).
-DEFAULTS_OF_RECORD = {"planner.greedy_home": "original", "planner.return_queue": "all", "drones.energy.approach": 0.0}
+# Defaults that changed after runs were recorded, with the value they had then (a field's ``was=``). A run that
+# leaves such a key to its default is fingerprinted with the value of record, and every run's config is compared
+# with these: so a changed default neither makes a stored run look changed (every FlyAgent run holds a planner
+# section) nor hides a real difference (a run that set the new default's value explicitly was already non-default
+# then). The one case it cannot tell apart: a condition that relies on the default and ran both before and after the
+# change; give such a condition the key explicitly (configs/thesis/planner.yaml sets planner.greedy_home,
+# configs/endurance.yaml the return rule's reserve and the final approach).
+DEFAULTS_OF_RECORD = values_of_record(Config)
 
 # The models the stored runs loaded, by the digest of the checkpoint file each setting resolved to when runs began to
 # be fingerprinted by their models' contents: a run that loads one of these (the same setting, the same bytes)

@@ -35,9 +35,11 @@ class DroneSim:
     Args:
         fire: the simulator whose envs, map size, cell size and seed the drones share.
         cfg: drone physics and layout.
+        lands: the group lands at the base (the planner level): with a battery, a drone flying home makes the final
+            approach of ``cfg.energy.approach`` cells.
     """
 
-    def __init__(self, fire: FireSim, cfg: DroneConfig | None = None):
+    def __init__(self, fire: FireSim, cfg: DroneConfig | None = None, lands: bool = False):
         self.fire = fire
         self.cfg = cfg = cfg or DroneConfig()
         E, N = fire.num_envs, cfg.num_drones
@@ -63,8 +65,10 @@ class DroneSim:
         # A battery (issue 33) or none: the rules ask it either way (battery.py), so use_energy is left for what
         # differs in shape with a battery (the planner observation's energy part, the frames' charge bar).
         self.use_energy = cfg.energy.enabled
-        # cells: a drone flying home within them of the base's centre is on its final approach (0 = off)
-        self.approach = cfg.energy.approach if self.use_energy else 0.0
+        # cells: a drone flying home within them of the base's centre is on its final approach (0 = off). Only where
+        # the group lands at the base (``lands``: the planner level's landing rule flies that approach straight in); a
+        # FlyAgent drone flies home by its policy all the way, and stays in its neighbours' view.
+        self.approach = cfg.energy.approach if self.use_energy and lands else 0.0
 
         # field_bytes() counts these: keep it in step with them
         self.pos = ti.Vector.field(2, ti.f32, (E, N))

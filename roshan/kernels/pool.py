@@ -136,7 +136,7 @@ def take_planner_sims(land: LandCoverMap, cfg: Config, pc: PlannerConfig, num_en
 
     def build() -> PlannerSims:
         fire = FireSim(land, cfg.fire, cfg.wind, cfg.ignition, num_envs=num_envs, seed=seed, check_memory=False)
-        drones = DroneSim(fire, cfg.drones)
+        drones = DroneSim(fire, cfg.drones, lands=True)  # the planner level's landing rule (every controller)
         explorers = DroneSim(fire, pc.explorer_drones(cfg.drones))
         maps = ExploreMaps(fire, explorers, pc.num_explorers, pc.explorer_view_range, version=pc.meander,
                            index_bound=pc.explorer_index_bound)

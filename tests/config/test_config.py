@@ -201,12 +201,15 @@ def test_a_checkpoint_saved_before_a_key_existed_keeps_the_behaviour_it_had():
     """The return rule's reserve and the final approach changed default after runs were saved without those keys:
     such a checkpoint's config loads with the rule its run had, while a config file that leaves them out (and a
     checkpoint that has them) takes what it says."""
-    from roshan.config.upgrade import ADDED_KEYS, upgrade_saved_config
+    from roshan.config import upgrade_saved_config
+    from roshan.config.schema import values_of_record
 
     saved = to_dict(Config(drones=DroneConfig(energy=EnergyConfig(preset="scenario"))))
     del saved["planner"]["return_queue"], saved["drones"]["energy"]["approach"]
     cfg = from_dict(Config, upgrade_saved_config(saved))
-    assert (cfg.planner.return_queue, cfg.drones.energy.approach) == ("all", 0.0) == tuple(ADDED_KEYS.values())
+    assert (cfg.planner.return_queue, cfg.drones.energy.approach) == ("all", 0.0)
+    assert values_of_record(Config) == {"drones.energy.approach": 0.0, "planner.greedy_home": "original",
+                                        "planner.return_queue": "all"}  # the fields' was=
     assert "return_queue" not in saved["planner"]  # the caller's dict is left alone
     fresh = Config(drones=DroneConfig(energy=EnergyConfig(preset="scenario")))
     assert (fresh.planner.return_queue, fresh.drones.energy.approach) == ("waiting", 2.0)

@@ -239,11 +239,12 @@ def test_a_drone_flying_home_within_the_approach_is_out_of_the_others_way(approa
     """energy.approach: a drone flying home within that many cells of the groundstation's centre is down, like a
     landed one: it neither sees nor is seen by the other drones, nor sees the map's edge (on Borkenberge with 16
     drones, drones arriving together at the corner base hovered 1-2 cells off it until their batteries were
-    empty). 0 (the default): only a drone on the cell is down, so both see each other and the edge."""
+    empty). 0: only a drone on the cell is down, so both see each other and the edge. A group that does not land
+    (the FlyAgent level) makes no final approach, whatever the setting."""
     fire = FireSim(load_map("35x36_Woods"), ignition=IgnitionConfig(fire_percentage=0.0), num_envs=1, seed=0)
     fire.reset()
     drones = DroneSim(fire, DroneConfig(num_drones=2, use_vel_bins=False,
-                                        energy=EnergyConfig(preset="scenario", approach=approach)))
+                                        energy=EnergyConfig(preset="scenario", approach=approach)), lands=True)
     drones.reset()
     centre = (drones.groundstation.to_numpy()[0] + 0.5) * drones.cell
     inward = np.sign(np.array([drones.rows, drones.cols]) / 2 * drones.cell - centre)
@@ -258,6 +259,12 @@ def test_a_drone_flying_home_within_the_approach_is_out_of_the_others_way(approa
     drones.refilling.from_numpy(np.array([[0, 0]], np.int32))  # not flying home: in the air as any drone
     drones.set_state(np.array([[home_bound, other]], np.float32), np.zeros((1, 2, 2), np.float32))
     assert drones.neighbour_mask.to_numpy()[0, 0, 1] == 1 and drones.neighbour_mask.to_numpy()[0, 0, 0] == 1
+    flier = DroneSim(fire, DroneConfig(num_drones=2, use_vel_bins=False,
+                                       energy=EnergyConfig(preset="scenario", approach=approach)))  # a FlyAgent group
+    flier.reset()
+    flier.refilling.from_numpy(np.array([[1, 0]], np.int32))
+    flier.set_state(np.array([[home_bound, other]], np.float32), np.zeros((1, 2, 2), np.float32))
+    assert flier.neighbour_mask.to_numpy()[0, 0, 1] == 1 and flier.neighbour_mask.to_numpy()[0, 0, 0] == 1
 
 
 @ti.kernel

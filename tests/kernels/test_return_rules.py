@@ -67,7 +67,7 @@ def fire():
 
 def drones(fire, n=4, water=False, **energy):
     d = DroneSim(fire, DroneConfig(num_drones=n, use_vel_bins=False, use_water_limit=water,
-                                   energy=EnergyConfig(preset="scenario", **energy)))
+                                   energy=EnergyConfig(preset="scenario", **energy)), lands=True)
     d.reset()
     return d
 
