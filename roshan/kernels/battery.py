@@ -20,6 +20,9 @@ import taichi as ti
 from roshan.config import EnergyConfig
 from roshan.kernels.tasks import AWAY, HOME, RESTOCKED, take_cell
 
+# The frames' bar of a drone's charge, the first under its disc (dark = empty): :class:`ChargeGauge`
+BATTERY_COLOUR = (120, 230, 60)
+
 
 @ti.data_oriented
 class Battery:
@@ -73,6 +76,10 @@ class Battery:
     def landing_rule(self):
         """The planner level's landing rule for these drones (:class:`LandAtBase`)."""
         return LandAtBase(self.drones)
+
+    def gauges(self) -> tuple:
+        """What the frames show of it under each drone (:attr:`roshan.kernels.drones.DroneSim.gauges`): its charge."""
+        return (ChargeGauge(self),)
 
     # ------------------------------------------------------------------------------------------ rules
 
@@ -228,6 +235,9 @@ class NoBattery:
     def landing_rule(self):
         return NoLanding()  # nothing to land for
 
+    def gauges(self) -> tuple:
+        return ()  # a charge that never changes is not worth a bar
+
     @ti.func
     def fill(self, e, d):
         pass
@@ -275,6 +285,21 @@ class NoBattery:
     @ti.func
     def totals(self, e):
         return ti.Vector([0.0, 0.0, 0.0, 0.0])
+
+
+@ti.data_oriented
+class ChargeGauge:
+    """A battery's gauge in the frames: a bar under each drone filled with its charge (``fraction``, in [0, 1])."""
+
+    colour = BATTERY_COLOUR
+    label = "battery (bar under a drone)"
+
+    def __init__(self, battery: Battery):
+        self.battery = battery
+
+    @ti.func
+    def fraction(self, e, d) -> ti.f32:
+        return self.battery.charge_fraction(e, d)
 
 
 @ti.data_oriented

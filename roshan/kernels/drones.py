@@ -63,7 +63,7 @@ class DroneSim:
         self.capacity = cfg.water_capacity
         self.refill_rate = cfg.water_capacity * self.dt / (cfg.recharge_time + 1e-4)  # per step at the station
         # A battery (issue 33) or none: the rules ask it either way (battery.py), so use_energy is left for what
-        # differs in shape with a battery (the planner observation's energy part, the frames' charge bar).
+        # differs in shape with a battery (the planner observation's energy part).
         self.use_energy = cfg.energy.enabled
         # cells: a drone flying home within them of the base's centre is on its final approach (0 = off). Only where
         # the group lands at the base (``lands``: the planner level's landing rule flies that approach straight in); a
@@ -89,6 +89,9 @@ class DroneSim:
         self.battery = Battery(self, cfg.energy) if self.use_energy else NoBattery()  # its fields are its own
         # the last metres of a flight home, straight in (energy.approach cells; with a battery only)
         self.landing = FinalApproach(self, self.approach) if self.approach > 0.0 else NoApproach()
+        # What the frames draw under each drone, one bar each in this order: its battery's gauges, then its tank's
+        # fill with the water limit. Each has a colour, a legend label and a ti.func fraction(e, d) in [0, 1].
+        self.gauges = self.battery.gauges() + ((TankGauge(self),) if self.use_water else ())
         self.water.fill(cfg.water_capacity)
         self._all = np.ones(E, dtype=np.int32)
         self._burning = tasks.BurningCells(fire)  # assign_fire_goals' candidates
@@ -426,3 +429,22 @@ class DroneSim:
     def record_totals(self, e):
         """Env e's figures for the record's extra columns (:data:`roshan.episode.EXTRA_COLUMNS`, in order)."""
         return self.battery.totals(e)
+
+
+# The frames' bar of a drone's water, under its battery's (dark = empty): :class:`TankGauge`
+TANK_COLOUR = (40, 120, 255)
+
+
+@ti.data_oriented
+class TankGauge:
+    """The tank's gauge in the frames (with the water limit): a bar under each drone filled with its water."""
+
+    colour = TANK_COLOUR
+    label = "water in its tank (bar)"
+
+    def __init__(self, drones: DroneSim):
+        self.drones = drones
+
+    @ti.func
+    def fraction(self, e, d) -> ti.f32:
+        return ti.math.clamp(self.drones.water[e, d] / self.drones.capacity, 0.0, 1.0)

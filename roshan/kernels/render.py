@@ -349,9 +349,6 @@ GROUNDSTATION_COLOUR = (255, 255, 255)
 # A disc drawn on another drone's shrinks by NESTED_STEP of the radius per drone under it, to NESTED_MIN at least
 NESTED_STEP, NESTED_MIN = 0.3, 0.25
 EXPLORER_COLOUR = (255, 255, 255)  # explorers: white diamonds with a dark rim (planner drones are discs)
-# With a battery and / or the water limit, bars under each drone's disc: its charge, then its tank (dark = empty)
-BATTERY_COLOUR = (120, 230, 60)
-TANK_COLOUR = (40, 120, 255)
 MIN_DRONE_RADIUS_PX = 3.0
 
 
@@ -417,8 +414,8 @@ class DroneOverlay:
     discs, so drones are never hidden; within a layer drones are drawn in id order by a serial loop, so
     overlapping marks always come out the same, and a disc whose centre lies on an earlier drone's disc is drawn
     smaller (by :data:`NESTED_STEP` of the radius per drone under it), so that drones on one spot show as rings.
-    With a battery (``drones.energy``) and / or the water limit, two
-    bars under each disc, as wide as it, fill with the battery's charge and the tank's fill. Positions are read
+    Under each disc, one bar per gauge of the drone group (``DroneSim.gauges``, in their order), as wide as the
+    disc, fills with the gauge's fraction in its colour. Positions are read
     from the DroneSims' fields at each call (north up like the cells: metres along rows go down the image). Sizes
     come from :func:`mark_sizes`.
     """
@@ -501,13 +498,13 @@ class DroneOverlay:
                     image[py, px] = self.palette[d]
                 elif d2 <= outer * outer:
                     image[py, px] = rim
-        if ti.static(dr.use_energy or dr.use_water):
+        if ti.static(len(dr.gauges) > 0):
             self._draw_bars(image, env, px_per_m, radius, ti.max(2, cell_px // 10))
 
     @ti.func
     def _draw_bars(self, image: ti.template(), env, px_per_m, radius, height):
-        """Per drone, rows under its disc: the battery's charge, then the tank's fill, as filled fractions of a
-        bar as wide as the disc on a dark background."""
+        """Per drone, rows under its disc, one per gauge of the drone group in its order: the gauge's fraction of
+        a bar as wide as the disc, in its colour on a dark background."""
         dr = self.drones
         rim = ti.Vector(DRONE_RIM, ti.u8)
         ti.loop_config(serialize=True)
@@ -516,17 +513,12 @@ class DroneOverlay:
             width = ti.cast(2.0 * radius + 2.0, ti.i32)
             c0 = ti.floor(c[1] - radius - 1.0, ti.i32)
             row = ti.floor(c[0] + radius + 2.0, ti.i32)
-            if ti.static(dr.use_energy):
-                fill = dr.battery.charge_fraction(env, d)
+            for gauge in ti.static(dr.gauges):
+                fill = gauge.fraction(env, d)
                 _fill_rect(image, row, row + height, c0, c0 + width, rim)
                 _fill_rect(image, row, row + height, c0, c0 + ti.round(fill * width, ti.i32),
-                           ti.Vector(BATTERY_COLOUR, ti.u8))
+                           ti.Vector(gauge.colour, ti.u8))
                 row += height + 1
-            if ti.static(dr.use_water):
-                fill = ti.math.clamp(dr.water[env, d] / dr.capacity, 0.0, 1.0)
-                _fill_rect(image, row, row + height, c0, c0 + width, rim)
-                _fill_rect(image, row, row + height, c0, c0 + ti.round(fill * width, ti.i32),
-                           ti.Vector(TANK_COLOUR, ti.u8))
 
 
 def drone_overlay(drones, env: int = 0) -> DroneOverlay:
@@ -578,7 +570,7 @@ class EnvZeroFrames:
             self._classes = tuple(class_histogram(self.drones.fire.land_map))
         return frame_legend(self.drones.num_drones, explorers=self.explorers is not None,
                             known_fires=self.known_fires is not None, classes=self._classes,
-                            battery=self.drones.use_energy, tank=self.drones.use_water)
+                            gauges=self.drones.gauges)
 
     def close(self) -> None:
         """Release the window claim but keep the renderer: its fields and kernels are reused when the env's
@@ -591,13 +583,12 @@ BURNED_LABEL = "burned out"
 
 
 def frame_legend(num_drones: int = 0, explorers: bool = False, known_fires: bool = False,
-                 classes: tuple[int, ...] | list[int] = (), battery: bool = False,
-                 tank: bool = False) -> list[LegendItem]:
-    """The legend of a frame: the drones (``num_drones``, 0 for the fire alone; with their view, goal and the
-    groundstation), the planner's ``explorers``, the fire (seen and unseen with a ``known_fires`` map), the
-    states water and fire leave (put out, flooded, burned out), fire particles, and each land-cover class of
-    ``classes`` (the map's class ids) in its colour under its CLC+ name, so that a grey Sealed cell is not read as
-    burned out."""
+                 classes: tuple[int, ...] | list[int] = (), gauges: tuple = ()) -> list[LegendItem]:
+    """The legend of a frame: the drones (``num_drones``, 0 for the fire alone; with their view, goal, the
+    groundstation and the bar of each of their ``gauges``, ``DroneSim.gauges``), the planner's ``explorers``, the
+    fire (seen and unseen with a ``known_fires`` map), the states water and fire leave (put out, flooded, burned
+    out), fire particles, and each land-cover class of ``classes`` (the map's class ids) in its colour under its
+    CLC+ name, so that a grey Sealed cell is not read as burned out."""
     colours = [tuple(int(v) for v in c) for c in drone_colours(num_drones)]
     items = [LegendItem("disc", c, f"drone {d}") for d, c in enumerate(colours[:8])]
     if len(colours) > 8:
@@ -608,10 +599,8 @@ def frame_legend(num_drones: int = 0, explorers: bool = False, known_fires: bool
         items.append(LegendItem("diamond", EXPLORER_COLOUR, "explorer"))
     if colours:
         items.append(LegendItem("square", GROUNDSTATION_COLOUR, "groundstation"))
-    if colours and battery:
-        items.append(LegendItem("cell", BATTERY_COLOUR, "battery (bar under a drone)"))
-    if colours and tank:
-        items.append(LegendItem("cell", TANK_COLOUR, "water in its tank (bar)"))
+    if colours:
+        items += [LegendItem("cell", gauge.colour, gauge.label) for gauge in gauges]
     table = cell_colours()
     burning = tuple(int(v) for v in table[BURNING, 0])
     if known_fires:

@@ -16,7 +16,9 @@ from roshan.cli import main
 from roshan.config import Config, DroneConfig, EnergyConfig, FlyConfig
 from roshan.env.fly import FlyVectorEnv
 from roshan.env.heuristics import random_actions, straight_to_goal
-from roshan.kernels.render import BATTERY_COLOUR, TANK_COLOUR, FrameRenderer, drone_colours, drone_overlay
+from roshan.kernels.battery import BATTERY_COLOUR
+from roshan.kernels.drones import TANK_COLOUR
+from roshan.kernels.render import FrameRenderer, drone_colours, drone_overlay
 from roshan.tools.simulate import DRONE_SERIES_KEYS, SERIES_KEYS
 
 CELLS_PER_STEP = 0.1  # v_max * dt / cell size with the default drone physics (10 m/s, 0.1 s, 10 m)
