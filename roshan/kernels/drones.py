@@ -201,9 +201,9 @@ class DroneSim:
             self.extinguished[e, d] = 0
             self.n_extinguished[e, d] = 0
             self.objective[e, d] = 0
+            self.refilling[e, d] = 0  # the tank's or the battery's return: a new episode starts none
             if ti.static(self.use_water):
                 self.water[e, d] = self.capacity
-                self.refilling[e, d] = 0
             self.battery.fill(e, d)
 
     @ti.func

@@ -287,3 +287,12 @@ def test_the_final_approach_flies_straight_onto_the_groundstation_cell_and_lands
     battery = scalar(drones.battery.charge)
     fly_final_approach(drones, 10)
     assert scalar(drones.battery.charge) == battery  # on the cell: landed, nothing drawn
+
+
+def test_a_new_episode_starts_no_drone_on_its_way_home_without_a_water_limit_too():
+    """A drone the battery's return rule sent home (``refilling``) when its episode ended starts the next one free:
+    the reset cleared the flag with the water limit only, so with a battery alone it began the episode flying home."""
+    drones = make()
+    drones.refilling.fill(1)
+    drones.reset()
+    assert drones.refilling.to_numpy().tolist() == [[0]]
