@@ -80,7 +80,7 @@ class Config(schema.Section):
     iql: IQLConfig = field(default_factory=IQLConfig)
     rnd: RNDConfig = field(default_factory=RNDConfig)
     planner: PlannerConfig = field(default_factory=PlannerConfig)
-    profile: str = ""  # settings under the file's: thesis, newest, original, or several (thesis,original); see below
+    profile: str = ""  # settings under a loaded file's: thesis, newest, original or several (thesis,original)
 
     def __post_init__(self):
         super().__post_init__()  # each section is a section of its class (they validated themselves)

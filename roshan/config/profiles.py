@@ -6,7 +6,9 @@ profile's values for every key the file and the overrides leave alone, so a file
 Several profiles apply in the order named (``profile: thesis,original``: the thesis-era code with the defects it
 shared with the newest code). The run's config.yaml records the profile's name beside the values it resolved to, so
 a run folder reloads the same without the profile table; an experiment's fingerprint reads those values, not the
-name, so a condition that names a profile instead of listing its keys is the same run.
+name, so a condition that names a profile instead of listing its keys is the same run. Loading applies a profile
+(:func:`roshan.config.load_config`, from a file or ``--set``); a ``Config(profile=...)`` built in Python only records
+the name.
 
 ``roshan config show profile`` lists them with their values.
 """
