@@ -111,10 +111,13 @@ def _gather_neighbours(sim: ti.template(), e, c, tag, only_fresh) -> ti.i32:
     n = 0
     i = c // sim.cols
     j = c % sim.cols
-    for di, dj in ti.static(((-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1))):
-        ni = i + di
-        nj = j + dj
-        if 0 <= ni < sim.rows and 0 <= nj < sim.cols:
+    # A loop, not a static unroll: each neighbour's freshness test inlines the sparse record lookup, and eight
+    # copies of it (times the two callers) made the reset kernel the suite's slowest compile. Row-major order, the
+    # centre skipped, as before.
+    for k in range(9):
+        ni = i + k // 3 - 1
+        nj = j + k % 3 - 1
+        if k != 4 and 0 <= ni < sim.rows and 0 <= nj < sim.cols:
             nc = ni * sim.cols + nj
             if only_fresh == 0 or _fresh(sim, e, nc, tag) != 0:
                 sim.cand[e, n] = nc

@@ -63,6 +63,7 @@ def push_frame(obs: ti.template(), drones: ti.template(), e, d, frames: ti.templ
 
 @ti.func
 def fill_frames(obs: ti.template(), drones: ti.template(), e, d, frames: ti.template()):
-    """At reset the stack holds copies of the initial frame."""
-    for t in ti.static(range(frames)):
+    """At reset the stack holds copies of the initial frame (a loop, not an unroll: one copy of the frame code in
+    the reset kernel instead of one per stacked frame compiles faster)."""
+    for t in range(frames):
         write_frame(obs, drones, e, d, t)
