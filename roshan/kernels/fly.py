@@ -71,9 +71,9 @@ class FlyKernels(EpisodeKernels):
     @ti.func
     def new_episode(self, obs: ti.template(), frames: ti.template(), explore_frames: ti.template(), e,
                     seed_key: ti.u32):
-        """Reset env e: fire, drones, initial goals, step limit, and a full frame stack (``frames``)."""
+        """Reset env e, whose fire is already reset: drones, initial goals, step limit, and a full frame stack
+        (``frames``)."""
         dr = self.drones
-        self.fire.reset_env(e, seed_key)
         dr.place(e)
         k = rng.key(self.fire.env_key[e], rng.DOMAIN_DRONES, 1)
         for d in range(dr.num_drones):

@@ -188,10 +188,10 @@ class PlannerKernels(EpisodeKernels):
     @ti.func
     def new_episode(self, obs: ti.template(), obs_fly: ti.template(), obs_explore: ti.template(), e,
                     seed_key: ti.u32):
-        """docs/model/agents.md §4: fire, groundstation, drones (planner drones towards the nearest true fires, or the
-        groundstation for the heuristic, whose fire map is empty), explorers on their first waypoint."""
+        """docs/model/agents.md §4 (the fire is already reset): groundstation, drones (planner drones towards the
+        nearest true fires, or the groundstation for the heuristic, whose fire map is empty), explorers on their
+        first waypoint."""
         dr, ex = self.drones, self.explorers
-        self.fire.reset_env(e, seed_key)
         dr.place(e)
         ex.place(e)
         self.maps.reset_env(e, ex)
