@@ -30,6 +30,7 @@ PINNED_FLIER = Path(__file__).resolve().parent / "data" / "fly_collision_v1"  # 
                                                                                 # must not change the pins
 WINDOWS_FILE = Path(__file__).resolve().parent / "data" / "behaviour_windows.json"
 WINDOW = 50  # steps (fire updates, env steps or planner decisions) per windowed hash
+COMPILE_AS_USERS_DO = True  # the rest of the suite compiles fast (tests/conftest.py); the pins hold under both
 
 # fire_*: recorded on f14bffa (before the redesign). The others re-recorded once when Taichi's fast math was turned
 # off (issue 35: its approximate reciprocals made the FlyAgent kernels CPU-specific); an Intel AVX-512 Xeon gave the
@@ -196,3 +197,14 @@ if __name__ == "__main__":
         print(f'    "{name}": "{digest.hexdigest()}",')
     WINDOWS_FILE.write_text(json.dumps(windows, indent=1, sort_keys=True) + "\n")
     print(f"windows written to {WINDOWS_FILE}")
+
+
+def test_the_pins_are_checked_under_the_compile_users_get():
+    """The rest of the suite compiles without Taichi's advanced optimisation (tests/conftest.py); this module's
+    pins, recorded under the default, are checked under it too."""
+    import taichi as ti
+
+    from roshan.runtime import ensure_taichi
+
+    ensure_taichi()
+    assert ti.lang.impl.current_cfg().advanced_optimization is True

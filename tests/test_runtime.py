@@ -70,6 +70,17 @@ def test_taichi_runs_with_exact_math():
     assert ti.lang.impl.current_cfg().fast_math is False
 
 
+def test_the_suite_compiles_fast_here_and_in_its_subprocesses():
+    """tests/conftest.py turns Taichi's advanced optimisation off for the suite (a cold suite is mostly compiling),
+    in the environment, so the commands tests start compile fast too."""
+    runtime.ensure_taichi()
+    assert ti.lang.impl.current_cfg().advanced_optimization is False
+    code = "from roshan.runtime import ensure_taichi; import taichi as ti; ensure_taichi(); " \
+           "print(ti.lang.impl.current_cfg().advanced_optimization)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == "False"
+
+
 def test_the_kernel_cache_holds_all_of_this_packages_kernels(monkeypatch):
     """Taichi's default 100 MB disk cache evicts a quarter of itself when full; the suite's kernels outgrow it and
     were recompiled minutes after they were compiled (issue 31). The runtime raises the limit unless the user sets
