@@ -167,8 +167,7 @@ class Pristine:
     All fields go through three kernels compiled once per bundle (per-field ``to_numpy``/``fill`` would compile
     one kernel per field: ~6 s for a FlyAgent bundle). Fields that are all zero after construction are zeroed
     on restore; the others (maps, class tables, random tables, ...) are copied back from a saved copy, which is
-    small. The restoring kernel compiles at the bundle's first reuse: most bundles (a test's, a one-off
-    evaluation's) are never reused, and it took about a second to compile.
+    small. Construction restores once so every kernel is compiled with the bundle, not at its first reuse.
     """
 
     def __init__(self, objects: list[object]):
@@ -180,6 +179,7 @@ class Pristine:
         self.live = tuple(f for f, nz in zip(fields, flags, strict=True) if nz)
         self.saved = tuple(_field_like(f) for f in self.live)
         _unrolled(_copy, self.live, self.saved)
+        self.restore()
 
     def restore(self) -> None:
         for obj, attrs in self.attrs:
