@@ -162,6 +162,10 @@ class DroneConfig(Section):
     use_vel_bins: bool = True  # actions rounded to 41 levels (steps of 0.05)
     use_velocity_change: bool = False  # acceleration mode: v += a * (v_max / 2) * dt
     groundstation_start_percentage: float = num(1.0, 0.0, 1.0, doc="chance a drone starts at the groundstation")
+    bases: int = num(1, 1, 4, doc="groundstations per env, each one cell inside a corner of the map: the first in a "
+                                  "random corner (the drones start there), the others in the opposite corner, then "
+                                  "the other corner of the first's row, then that of its column (docs/model/agents.md "
+                                  "§4.1); a drone restocks at any of them and flies home to the nearest")
     use_water_limit: bool = False  # finite tank, newest code (docs/model/agents.md §14); off in the thesis experiments
     water_capacity: float = num(4.0, 0.0, lo_open=True, doc="tank size in drops (one drop puts out one cell)")
     recharge_time: float = num(2.0, 0.0, doc="seconds an empty tank takes to refill at the groundstation")

@@ -166,10 +166,10 @@ class Battery:
 
     @ti.func
     def energy_home(self, e, d) -> ti.f32:
-        """Joules drone d draws on the quickest flight to the groundstation's centre with a full tank: each axis is
+        """Joules drone d draws on the quickest flight to its nearest base's centre with a full tank: each axis is
         clamped to v_max, so the longer one flies at v_max and the other in step with it (no detour counted)."""
         dr = self.drones
-        gap = ti.abs(dr.groundstation_centre(e) * dr.cell - dr.pos[e, d])
+        gap = ti.abs(dr.base_centre(e, dr.nearest_base(e, d)) * dr.cell - dr.pos[e, d])
         long_axis = ti.max(gap[0], gap[1])
         ratio = ti.min(gap[0], gap[1]) / ti.max(long_axis, 1e-6)
         speed_sq = dr.v_max * dr.v_max * (1.0 + ratio * ratio)
@@ -318,7 +318,7 @@ class FinalApproach:
         dr = self.drones
         near = 0
         if dr.refilling[e, d] != 0:
-            gap = dr.pos[e, d] / dr.cell - dr.groundstation_centre(e)
+            gap = dr.pos[e, d] / dr.cell - dr.home_centre(e, d)
             near = ti.cast(gap.dot(gap) <= self.cells * self.cells, ti.i32)
         return near
 

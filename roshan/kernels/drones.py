@@ -19,6 +19,9 @@ from roshan.kernels.battery import Battery, FinalApproach, NoApproach, NoBattery
 from roshan.kernels.fire import FireSim
 
 BIN = 0.05  # action resolution with use_vel_bins: 41 levels in [-1, 1]
+# The corners of the bases after the first (docs/model/agents.md §4.1), as masks XORed onto the first base's corner id
+# 2 * (row != 1) + (col != 1): the opposite corner, then the other corner of the first's row, then that of its column.
+BASE_CORNER_MASKS = (0, 3, 1, 2)
 
 
 @ti.func
@@ -57,6 +60,10 @@ class DroneSim:
         margin = max(0.05 * self.cell, 0.1)
         self.ring = min(self.cell / 2.0 - margin, max(2.0 * cfg.drone_size, 0.35 * self.cell))
         self.start_gs = cfg.groundstation_start_percentage
+        self.num_bases = B = cfg.bases
+        if B > 1 and min(self.rows, self.cols) < 4:
+            raise ValueError(f"drones.bases = {B} needs a map of at least 4 x 4 cells (the bases sit one cell inside "
+                             f"distinct corners); this one has {self.rows} x {self.cols}: set drones.bases = 1")
         # Water (docs/model/agents.md §14, newest code). Every use sits behind ti.static(self.use_water), so without the
         # limit the kernels are the ones of an infinite tank.
         self.use_water = cfg.use_water_limit
@@ -75,7 +82,8 @@ class DroneSim:
         self.vel = ti.Vector.field(2, ti.f32, (E, N))
         self.out_count = ti.field(ti.i32, (E, N))  # consecutive steps outside the grid
         self.collided = ti.field(ti.i32, (E, N))  # sticky until reset
-        self.groundstation = ti.Vector.field(2, ti.i32, E)  # cell (row, col)
+        self.bases = ti.Vector.field(2, ti.i32, (E, B))  # groundstation cells (row, col); base 0 is the drones' start
+        self.home = ti.field(ti.i32, (E, N))  # the base each drone last headed home to (its nearest then)
         self.neighbours = ti.Vector.field(4, ti.f32, (E, N, N))  # slot 0: nearest boundary; then other drones
         self.neighbour_mask = ti.field(ti.i32, (E, N, N))
         self.goal = ti.Vector.field(2, ti.f32, (E, N))  # grid units (a cell centre)
@@ -102,8 +110,8 @@ class DroneSim:
         before it is built, its battery's included (``drones.energy``); the water tanks, full once built, once more
         for the pristine copy of the simulator pool."""
         n = cfg.num_drones
-        per_drone = 8 + 8 + 4 + 4 + 8 + 4 + 4 + 4 + 4 + 4 + 4 + 4  # pos ... refilling
-        per_env = n * per_drone + n * n * (16 + 4) + 8 + 4  # + neighbours, their mask, groundstation, _all
+        per_drone = 8 + 8 + 4 + 4 + 8 + 4 + 4 + 4 + 4 + 4 + 4 + 4 + 4  # pos ... refilling, home
+        per_env = n * per_drone + n * n * (16 + 4) + 8 * cfg.bases + 4  # + neighbours, their mask, bases, _all
         return num_envs * (per_env + 4 * n) + (Battery if cfg.energy.enabled else NoBattery).field_bytes(num_envs, n)
 
     def parts(self) -> list:
@@ -113,7 +121,7 @@ class DroneSim:
     # ------------------------------------------------------------------------------------------ public API
 
     def reset(self, mask=None) -> None:
-        """Place the groundstation and the drones of the masked envs (call after the fire's reset)."""
+        """Place the bases and the drones of the masked envs (call after the fire's reset)."""
         mask = self._all if mask is None else int32_array(mask, (self.num_envs,), "reset mask")
         self._reset(mask)
 
@@ -177,11 +185,16 @@ class DroneSim:
 
     @ti.func
     def place(self, e):
-        """Groundstation one cell inside a random corner; drones on a ring around their start cell."""
+        """The first base one cell inside a random corner, the others in the corners after it
+        (:data:`BASE_CORNER_MASKS`); drones on a ring around their start cell (the first base's)."""
         k = rng.key(self.fire.env_key[e], rng.DOMAIN_DRONES, 0)
         gi = ti.select(rng.uniform(rng.key(k, 0, 0)) < 0.5, 1, self.rows - 2)  # row drawn first
         gj = ti.select(rng.uniform(rng.key(k, 1, 0)) < 0.5, 1, self.cols - 2)
-        self.groundstation[e] = ti.Vector([gi, gj])
+        self.bases[e, 0] = ti.Vector([gi, gj])
+        if ti.static(self.num_bases > 1):
+            first = 2 * ti.cast(gi != 1, ti.i32) + ti.cast(gj != 1, ti.i32)
+            for b in ti.static(range(1, self.num_bases)):
+                self.bases[e, b] = self.corner_cell(first ^ BASE_CORNER_MASKS[b])
         for d in range(self.num_drones):
             ci = gi
             cj = gj
@@ -202,6 +215,7 @@ class DroneSim:
             self.n_extinguished[e, d] = 0
             self.objective[e, d] = 0
             self.refilling[e, d] = 0  # the tank's or the battery's return: a new episode starts none
+            self.home[e, d] = self.nearest_base(e, d)
             if ti.static(self.use_water):
                 self.water[e, d] = self.capacity
             self.battery.fill(e, d)
@@ -253,15 +267,20 @@ class DroneSim:
 
     @ti.func
     def at_groundstation(self, e, d) -> ti.i32:
-        gs = self.groundstation[e]
-        return ti.cast(self.cell_of(e, d) == gs[0] * self.cols + gs[1], ti.i32)
+        """Drone d is on a base's cell (any base: a drone restocks at each)."""
+        c = self.cell_of(e, d)
+        on = 0
+        for b in ti.static(range(self.num_bases)):
+            gs = self.bases[e, b]
+            if c == gs[0] * self.cols + gs[1]:
+                on = 1
+        return on
 
     @ti.func
     def refill(self, e, d):
-        """Newest code: min(capacity, w + capacity * dt / (recharge_time + 1e-4)) while the drone's cell is the
-        groundstation's (full after ceil((recharge_time + 1e-4) / dt) steps from empty: 21 with the defaults)."""
-        gs = self.groundstation[e]
-        if self.cell_of(e, d) == gs[0] * self.cols + gs[1]:
+        """Newest code: min(capacity, w + capacity * dt / (recharge_time + 1e-4)) while the drone's cell is a
+        base's (full after ceil((recharge_time + 1e-4) / dt) steps from empty: 21 with the defaults)."""
+        if self.at_groundstation(e, d) != 0:
             self.water[e, d] = ti.min(self.capacity, self.water[e, d] + self.refill_rate)
 
     @ti.func
@@ -336,9 +355,9 @@ class DroneSim:
 
     @ti.func
     def straight_to_base(self, e, d):
-        """The velocity command that flies drone d straight to the groundstation's centre, as fast as allowed and
+        """The velocity command that flies drone d straight to its home base's centre, as fast as allowed and
         no further (the final approach; in acceleration mode the command that brakes towards it)."""
-        want = ti.math.clamp((self.groundstation_centre(e) * self.cell - self.pos[e, d]) / self.dt,
+        want = ti.math.clamp((self.home_centre(e, d) * self.cell - self.pos[e, d]) / self.dt,
                              -self.v_max, self.v_max)
         a = want / self.v_max
         if ti.static(self.use_accel):
@@ -346,8 +365,40 @@ class DroneSim:
         return a
 
     @ti.func
-    def groundstation_centre(self, e):
-        return ti.cast(self.groundstation[e], ti.f32) + 0.5
+    def base_centre(self, e, b):
+        """Grid coordinates (row, col) of the centre of env e's base b."""
+        return ti.cast(self.bases[e, b], ti.f32) + 0.5
+
+    @ti.func
+    def home_centre(self, e, d):
+        """The centre of drone d's home: the base it last headed home to (:meth:`head_home`)."""
+        return self.base_centre(e, self.home[e, d])
+
+    @ti.func
+    def nearest_base(self, e, d) -> ti.i32:
+        """The base whose centre is nearest to drone d (Euclidean, grid units; ties to the lower index)."""
+        best = 0
+        if ti.static(self.num_bases > 1):
+            x = self.pos[e, d] / self.cell
+            gap = self.base_centre(e, 0) - x
+            best_sq = gap.dot(gap)
+            for b in ti.static(range(1, self.num_bases)):
+                gap = self.base_centre(e, b) - x
+                if gap.dot(gap) < best_sq:
+                    best_sq = gap.dot(gap)
+                    best = b
+        return best
+
+    @ti.func
+    def head_home(self, e, d):
+        """Drone d heads home: its nearest base becomes its home. Returns that base's centre (its goal)."""
+        self.home[e, d] = self.nearest_base(e, d)
+        return self.home_centre(e, d)
+
+    @ti.func
+    def corner_cell(self, corner):
+        """The cell one cell inside the map's corner ``corner`` = 2 * (bottom row) + (right column)."""
+        return ti.Vector([ti.select(corner < 2, 1, self.rows - 2), ti.select(corner % 2 == 0, 1, self.cols - 2)])
 
     @ti.func
     def cell_of(self, e, d) -> ti.i32:
@@ -365,18 +416,18 @@ class DroneSim:
 
     @ti.func
     def heads_home(self, e, d) -> ti.i32:
-        """Drone d's goal is the groundstation's centre (within 0.25 cells on both axes)."""
-        gs = self.groundstation_centre(e)
+        """Drone d's goal is its home base's centre (within 0.25 cells on both axes)."""
+        gs = self.home_centre(e, d)
         g = self.goal[e, d]
         return ti.cast(ti.abs(g[0] - gs[0]) < 0.25 and ti.abs(g[1] - gs[1]) < 0.25, ti.i32)
 
     @ti.func
     def random_corner_goal(self, e, d, h: ti.u32):
-        """A random one of the three non-groundstation corner cells (centre, grid units)."""
-        gs = self.groundstation[e]
+        """A random one of the three corner cells other than the first base's (centre, grid units)."""
+        gs = self.bases[e, 0]
         pick = rng.uniform_int(h, 3)
         n = 0
-        goal = self.groundstation_centre(e)
+        goal = self.base_centre(e, 0)
         for corner in ti.static(range(4)):
             ci = ti.static(1 if corner < 2 else -2)
             cj = ti.static(1 if corner % 2 == 0 else -2)

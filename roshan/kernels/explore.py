@@ -312,7 +312,7 @@ class ExploreMaps:
         for i, j in ti.ndrange(self.rows, self.cols):
             self.fire_map[e, i, j] = ti.i8(0)
         self.known_fires[e] = 0
-        gs = explorers.groundstation[e]
+        gs = explorers.bases[e, 0]
         corner = 2 * ti.cast(gs[0] != 1, ti.i32) + ti.cast(gs[1] != 1, ti.i32)
         self.corner[e] = corner
         self.wp_dir[e] = 1

@@ -197,7 +197,7 @@ class PlannerKernels(EpisodeKernels):
         self.maps.reset_env(e, ex)
         for d in range(dr.num_drones):
             if ti.static(self.greedy):
-                dr.goal[e, d] = dr.groundstation_centre(e)
+                dr.goal[e, d] = dr.head_home(e, d)
                 dr.goal_cell[e, d] = -1
             else:
                 self.rules.retarget(e, d)
@@ -278,9 +278,9 @@ class PlannerKernels(EpisodeKernels):
 
     @ti.func
     def assign_goals(self, actions: ti.template(), e):
-        """docs/model/agents.md §13.4: candidate 0 (and any index past the valid list) is the groundstation."""
+        """docs/model/agents.md §13.4: candidate 0 (and any index past the valid list) is the groundstation: the
+        drone's nearest base (with ``drones.bases`` > 1; the observation lists the first base's centre there)."""
         dr = self.drones
-        gs = dr.groundstation_centre(e)
         for d in range(dr.num_drones):
             k = ti.cast(actions[e, d], ti.i32)
             if self.returns.keeps_goal(e, d) != 0:
@@ -293,7 +293,7 @@ class PlannerKernels(EpisodeKernels):
                 dr.goal[e, d] = dr.cell_centre(c)
             else:
                 dr.goal_cell[e, d] = GROUND_GOAL
-                dr.goal[e, d] = gs
+                dr.goal[e, d] = dr.head_home(e, d)  # its nearest base
             dr.prev_dist[e, d] = dr.distance_to_goal(e, d)
         # FlyingTowardsGroundStation and SameGoalPenalty judge this decision.
         to_ground = 0.0
@@ -383,7 +383,7 @@ class PlannerKernels(EpisodeKernels):
             dr.battery.observe(obs, e, d, self.o_energy + 2 * d)  # the observation's energy part (with a battery)
         f0 = self.o_fires
         m0 = self.o_mask
-        gs = dr.groundstation_centre(e)
+        gs = dr.base_centre(e, 0)
         obs[e, f0] = gs[0] * self.norm - 1.0
         obs[e, f0 + 1] = gs[1] * self.norm - 1.0
         obs[e, m0] = 1.0

@@ -452,8 +452,10 @@ class DroneOverlay:
         half_view = dr.half_view * cell_px
         radius = ti.max(MIN_DRONE_RADIUS_PX, dr.cfg.drone_size * px_per_m, 0.3 * cell_px)
         rim = ti.Vector(DRONE_RIM, ti.u8)
-        gs = dr.groundstation[env] * cell_px
-        _outline(image, gs[0], gs[0] + cell_px, gs[1], gs[1] + cell_px, thick, ti.Vector(GROUNDSTATION_COLOUR, ti.u8))
+        for b in ti.static(range(dr.num_bases)):
+            gs = dr.bases[env, b] * cell_px
+            _outline(image, gs[0], gs[0] + cell_px, gs[1], gs[1] + cell_px, thick,
+                     ti.Vector(GROUNDSTATION_COLOUR, ti.u8))
         if ti.static(self.has_explorers):
             ex = self.explorers
             white = ti.Vector(EXPLORER_COLOUR, ti.u8)

@@ -117,12 +117,12 @@ def nearest_free_cell(drones: ti.template(), cands: ti.template(), e, d) -> ti.i
 
 @ti.func
 def take_cell(drones: ti.template(), e, d, c):
-    """Reserve cell c as drone d's goal; c = -1 sends it to the groundstation."""
+    """Reserve cell c as drone d's goal; c = -1 sends it home to its nearest base."""
     drones.goal_cell[e, d] = c
-    goal = drones.groundstation_centre(e)
     if c >= 0:
-        goal = drones.cell_centre(c)
-    drones.goal[e, d] = goal
+        drones.goal[e, d] = drones.cell_centre(c)
+    else:
+        drones.goal[e, d] = drones.head_home(e, d)
 
 
 @ti.func
@@ -215,7 +215,7 @@ class FlyRules:
         last = drop_at_goal(dr, self.candidates, e, d)
         if dr.has_water(e, d) == 0:
             dr.refilling[e, d] = 1
-            dr.goal[e, d] = dr.groundstation_centre(e)
+            dr.goal[e, d] = dr.head_home(e, d)
         else:
             self.retarget(e, d)
         return last

@@ -84,7 +84,7 @@ def test_drone_overlay_draws_north_up_where_the_drone_and_its_goal_are(simple_en
     assert (img[35, 202] == colour).all(), "the disc sits at (x1, x2) / cell_size * cell_px"
     assert not (img[202 % img.shape[0], 35] == colour).all()
     assert (img[105, 55] == colour).all(), "the goal cross is centred on the goal (grid units * cell_px)"
-    gs_row, gs_col = env.drones.groundstation.to_numpy()[2] * 10
+    gs_row, gs_col = env.drones.bases.to_numpy()[:, 0][2] * 10
     assert (img[gs_row, gs_col:gs_col + 10] == 255).all(), "the groundstation cell has a white outline"
 
 

@@ -136,7 +136,7 @@ def home_fraction(env: PlannerVectorEnv, battery: float) -> np.ndarray:
     """(E, N) energy of each drone's quickest flight home over a full battery, computed here from the positions
     (kernels/battery.py Battery.energy_home, with the scenario's powers and a full tank)."""
     dr, values = env.drones, env.config.drones.energy.values()
-    centre = (dr.groundstation.to_numpy()[:, None, :] + 0.5) * dr.cell
+    centre = (dr.bases.to_numpy()[:, 0][:, None, :] + 0.5) * dr.cell
     gap = np.abs(centre - dr.pos.to_numpy())
     long_axis, short_axis = gap.max(-1), gap.min(-1)
     v = env.config.drones.max_speed
@@ -196,7 +196,7 @@ def test_planner_drones_sent_home_together_land_there_and_get_their_swap():
     for _ in range(12):  # out to the first listed fire: the batteries drain
         env.step(torch.ones((2, 3), dtype=torch.long))
     dr = env.drones
-    gs = dr.groundstation.to_numpy()[:, None, :]
+    gs = dr.bases.to_numpy()[:, 0][:, None, :]
     landed_at = {}
     for _ in range(150):
         env.step(torch.zeros((2, 3), dtype=torch.long))  # candidate 0: the groundstation
@@ -223,7 +223,7 @@ def test_planner_drones_with_the_resource_rule_go_home_by_themselves_and_stay_un
         env.step(fire)
     env.step(home)
     assert dr.refilling.to_numpy().all()  # drained: sent home until stocked
-    centre = dr.groundstation.to_numpy()[:, None, :] + 0.5
+    centre = dr.bases.to_numpy()[:, 0][:, None, :] + 0.5
     lost = 0.0
     for _ in range(400):
         _, _, terms, truncs, info = env.step(fire)

@@ -78,7 +78,7 @@ def test_goal_reached_ends_the_episode_successfully_and_autoresets():
     assert info["episode_stats"]["success"][0].item() == 1.0 and info["episode_stats"]["steps"][0].item() == 1
     final = info["final_obs"]["agent"][0, 0, 0]
     assert final[8].item() == pytest.approx(np.hypot(0.1, 0.1) / 5, rel=1e-3)  # distance feature at the end
-    gs = env.drones.groundstation.to_numpy()[0]
+    gs = env.drones.bases.to_numpy()[:, 0][0]
     assert np.linalg.norm(env.drones.pos.to_numpy()[0, 0] - (gs + 0.5) * 10) == pytest.approx(0.0, abs=1e-4), \
         "the env was reset in the same step: one drone starts on the groundstation centre"
 
@@ -165,7 +165,7 @@ def test_greedy_assignment_takes_the_nearest_unreserved_fire_then_the_groundstat
     mask[0, [12 * cols + 10, 10 * cols + 13]] = 1  # 2 and 3 cells away from the drones' cell (10, 10)
     env.fire.ignite_cells(mask)
     env.drones.assign_fire_goals()
-    gs = env.drones.groundstation.to_numpy()[0] + 0.5
+    gs = env.drones.bases.to_numpy()[:, 0][0] + 0.5
     np.testing.assert_allclose(env.drones.goal.to_numpy()[0], [[12.5, 10.5], [10.5, 13.5], gs])
     assert env.drones.goal_cell.to_numpy()[0].tolist() == [12 * cols + 10, 10 * cols + 13, -1]
 

@@ -184,7 +184,7 @@ def test_greedy_and_planner_evaluations_see_identical_fire_layouts():
     for _ in range(2):  # the first episodes, then the next ones (reset again without a seed)
         for e in range(2):
             np.testing.assert_array_equal(planner.fire.state(e), greedy.fire.state(e))
-        np.testing.assert_array_equal(planner.drones.groundstation.to_numpy(), greedy.drones.groundstation.to_numpy())
+        np.testing.assert_array_equal(planner.drones.bases.to_numpy()[:, 0], greedy.drones.bases.to_numpy()[:, 0])
         np.testing.assert_array_equal(planner.fire.wind_vectors(), greedy.fire.wind_vectors())
         planner.reset()
         greedy.reset()
@@ -215,7 +215,7 @@ def test_greedy_fire_on_the_groundstation_cell_is_put_out_only_with_the_fix(home
     pc = PlannerConfig(interval=1, fly_model=MODEL, explorer_model=MODEL, num_explorers=2, greedy_home=home)
     env = PlannerVectorEnv(2, cfg, pc, evaluation=True, controller="greedy", seed=3)
     env.reset(seed=3)
-    gs = env.drones.groundstation.to_numpy()
+    gs = env.drones.bases.to_numpy()[:, 0]
     cells = gs[:, 0] * env.fire.cols + gs[:, 1]
     mask = np.zeros((2, env.fire.num_cells), np.int32)
     mask[[0, 1], cells] = 1

@@ -59,7 +59,7 @@ def ignite(env, *cells):
 
 def inward(env):
     """The groundstation cell and the diagonal unit step (+-1, +-1) from it towards the map's interior."""
-    gs = env.drones.groundstation.to_numpy()[0]
+    gs = env.drones.bases.to_numpy()[:, 0][0]
     return gs, np.array([1 if gs[0] < env.fire.rows // 2 else -1, 1 if gs[1] < env.fire.cols // 2 else -1])
 
 

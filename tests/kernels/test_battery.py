@@ -127,7 +127,7 @@ def energy_home(drones: ti.template()) -> ti.f32:
 
 def test_the_energy_of_the_flight_home_is_the_quickest_flights():
     d = make()
-    gs = (d.groundstation.to_numpy()[0] + 0.5) * d.cell
+    gs = (d.bases.to_numpy()[:, 0][0] + 0.5) * d.cell
     put(d, tuple(gs + np.array([80.0, -60.0])))
     # the 80 m axis at 10 m/s takes 8 s, the other flies 7.5 m/s beside it: |v|^2 = 156.25, P = 100 + 39.0625 + 20
     assert energy_home(d) == pytest.approx(8.0 * (100.0 + 0.25 * 156.25 + 20.0), rel=1e-5)
@@ -174,7 +174,7 @@ def test_a_swap_on_the_groundstation_restores_the_battery_after_the_set_time():
     fly(d, (0.0, 0.0), 10)
     left = scalar(b.charge)
     assert left < 15000.0
-    gs = d.groundstation.to_numpy()[0]
+    gs = d.bases.to_numpy()[:, 0][0]
     put(d, tuple((gs + 0.5) * d.cell))
     fly(d, (0.0, 0.0), 19)
     assert scalar(b.charge) == left and scalar(b.swaps) == 0  # landed: nothing drawn, the swap not done yet
@@ -188,7 +188,7 @@ def test_leaving_the_base_before_the_swap_is_done_restarts_it():
     d = make(swap_time=2.0)
     put(d, AWAY)
     fly(d, (0.0, 0.0), 10)
-    gs = d.groundstation.to_numpy()[0]
+    gs = d.bases.to_numpy()[:, 0][0]
     base = tuple((gs + 0.5) * d.cell)
     put(d, base)
     fly(d, (0.0, 0.0), 15)
@@ -246,7 +246,7 @@ def test_a_drone_flying_home_within_the_approach_is_out_of_the_others_way(approa
     drones = DroneSim(fire, DroneConfig(num_drones=2, use_vel_bins=False,
                                         energy=EnergyConfig(preset="scenario", approach=approach)), lands=True)
     drones.reset()
-    centre = (drones.groundstation.to_numpy()[0] + 0.5) * drones.cell
+    centre = (drones.bases.to_numpy()[:, 0][0] + 0.5) * drones.cell
     inward = np.sign(np.array([drones.rows, drones.cols]) / 2 * drones.cell - centre)
     home_bound = centre + inward * 1.0 * drones.cell  # 1.4 cells off the base, towards the map's middle
     other = centre + inward * 3.0 * drones.cell
@@ -279,7 +279,7 @@ def test_the_final_approach_flies_straight_onto_the_groundstation_cell_and_lands
     """energy.approach: 1.4 cells off the base's centre, the approach command brings the drone onto the cell within
     the time the straight flight takes at v_max, and it stays there (landed, drawing nothing)."""
     drones = make(approach=2.0)
-    centre = (drones.groundstation.to_numpy()[0] + 0.5) * drones.cell
+    centre = (drones.bases.to_numpy()[:, 0][0] + 0.5) * drones.cell
     inward = np.sign(np.array([drones.rows, drones.cols]) / 2 * drones.cell - centre)
     put(drones, tuple(centre + inward * drones.cell))
     fly_final_approach(drones, int(np.ceil(drones.cell / (drones.v_max * DT))) + 1)

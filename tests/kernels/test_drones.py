@@ -71,7 +71,7 @@ def test_boundary_counter_counts_consecutive_steps_outside():
 
 def test_groundstation_corner_and_ring_start():
     d = make(num_drones=4, envs=32, seed=3)
-    gs = d.groundstation.to_numpy()
+    gs = d.bases.to_numpy()[:, 0]
     assert set(map(tuple, gs)) <= {(1, 1), (1, 34), (33, 1), (33, 34)}
     assert len(set(map(tuple, gs))) > 1, "the corner is random per env"
     pos = d.pos.to_numpy()

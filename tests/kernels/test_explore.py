@@ -143,7 +143,7 @@ def fly_to_goals_and_advance(explorers, maps, steps):
 
 
 def expected_goals(explorers, maps, index):
-    gs = explorers.groundstation.to_numpy()
+    gs = explorers.bases.to_numpy()[:, 0]
     corners = [corner_cells(maps.rows, maps.cols).index(tuple(g)) for g in gs]
     goals = [[p[min(k, len(p) - 1)] for p in maps.paths[c]] for c, k in zip(corners, index, strict=True)]
     return np.asarray(goals, np.float32)
@@ -151,7 +151,7 @@ def expected_goals(explorers, maps, index):
 
 def test_reset_assigns_waypoint_zero_of_the_groundstation_corner():
     fire, explorers, maps = make(load_map("35x36_Woods"), envs=16, seed=5)
-    gs = explorers.groundstation.to_numpy()
+    gs = explorers.bases.to_numpy()[:, 0]
     assert len(set(map(tuple, gs))) > 1
     corners = maps.corner.to_numpy()
     for e in range(16):

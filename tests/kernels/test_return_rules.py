@@ -73,7 +73,7 @@ def drones(fire, n=4, water=False, **energy):
 
 
 def base_centre(d) -> np.ndarray:
-    return (d.groundstation.to_numpy()[0] + 0.5) * d.cell
+    return (d.bases.to_numpy()[:, 0][0] + 0.5) * d.cell
 
 
 def place(d, offsets):
@@ -120,7 +120,7 @@ def test_a_drone_turns_home_once_its_battery_holds_its_flight_home_with_the_marg
     set_field(d.battery.charge, [need - 2.0, FULL, FULL, FULL], np.float32)
     assert rule.watch(0) == HOME
     assert d.refilling.to_numpy()[0, 0] == 1 and d.goal_cell.to_numpy()[0, 0] == -1  # its fire is free for others
-    np.testing.assert_allclose(d.goal.to_numpy()[0, 0], d.groundstation.to_numpy()[0] + 0.5)
+    np.testing.assert_allclose(d.goal.to_numpy()[0, 0], d.bases.to_numpy()[:, 0][0] + 0.5)
     assert rule.watch(0) == HOME and rule.keeps_goal(0) == 1  # waits there until stocked
     set_field(d.battery.charge, [FULL, FULL, FULL, FULL], np.float32)
     assert rule.watch(0) == RESTOCKED and d.refilling.to_numpy()[0, 0] == 0 and rule.keeps_goal(0) == 0
@@ -155,7 +155,7 @@ def test_without_the_return_rule_no_drone_goes_home_by_itself(fire):
 
 def test_the_landing_rule_holds_a_landed_drone_and_flies_the_final_approach_straight_in(fire):
     d = drones(fire, n=3, approach=2.0)
-    gs = d.groundstation.to_numpy()[0]
+    gs = d.bases.to_numpy()[:, 0][0]
     place(d, [(0.0, 0.0), inward(d) * d.cell, inward(d) * 4.0 * d.cell])
     set_field(d.refilling, [1, 1, 1], np.int32)
     land, out = Probe(LandAtBase(d)), np.zeros(2, np.float32)

@@ -80,7 +80,7 @@ def test_a_held_burning_cell_is_taken_and_the_next_drone_goes_home(world):
         setup(world, [A])
         world[search].run()
         assert goal_cells(world) == [A, None]
-        gs = world[1].groundstation.to_numpy()[0] + 0.5
+        gs = world[1].bases.to_numpy()[:, 0][0] + 0.5
         np.testing.assert_allclose(world[1].goal.to_numpy()[0, 1], gs)
 
 

@@ -1,0 +1,121 @@
+"""Several bases (``drones.bases``, docs/model/agents.md §4.1): their placement, the nearest base a drone heads home
+to, and a restock (tank and battery) at a base other than the first."""
+
+import numpy as np
+import pytest
+import taichi as ti
+
+from roshan.config import ConfigError, DroneConfig, EnergyConfig, IgnitionConfig
+from roshan.config.schema import from_dict
+from roshan.kernels.drones import DroneSim
+from roshan.kernels.fire import FireSim
+from roshan.maps import load_map, uniform_map
+
+CORNERS = {(1, 1), (1, 34), (33, 1), (33, 34)}  # one cell inside the corners of 35x36_Woods
+OPPOSITE = {(1, 1): (33, 34), (1, 34): (33, 1), (33, 1): (1, 34), (33, 34): (1, 1)}
+AWAY = (150.0, 150.0)  # metres: the middle of the map, far from every base
+
+
+def make(bases=1, envs=1, seed=0, **kw):
+    fire = FireSim(load_map("35x36_Woods"), ignition=IgnitionConfig(fire_percentage=0.0), num_envs=envs, seed=seed)
+    fire.reset()
+    drones = DroneSim(fire, DroneConfig(num_drones=1, use_vel_bins=False, bases=bases, **kw))
+    drones.reset()
+    return drones
+
+
+def put(drones, pos):
+    drones.set_state(np.array([[pos]], np.float32), np.zeros((1, 1, 2), np.float32))
+
+
+def fly_still(drones, steps):
+    for _ in range(steps):
+        drones.move(np.zeros((1, 1, 2), np.float32))
+
+
+def centre_m(drones, b):
+    return tuple((drones.bases.to_numpy()[0, b] + 0.5) * drones.cell)
+
+
+@ti.kernel
+def energy_home(drones: ti.template()) -> ti.f32:
+    return drones.battery.energy_home(0, 0)
+
+
+def test_the_key_is_an_int_from_1_to_4():
+    assert DroneConfig().bases == 1
+    for bad in (0, 5, -1):
+        with pytest.raises(ConfigError, match="bases"):
+            from_dict(DroneConfig, {"bases": bad})
+
+
+@pytest.mark.parametrize("count", [1, 2, 4])
+def test_bases_sit_in_distinct_corners_the_first_where_one_base_would(count):
+    one = make(bases=1, envs=16, seed=5).bases.to_numpy()[:, 0]
+    bases = make(bases=count, envs=16, seed=5).bases.to_numpy()
+    assert bases.shape == (16, count, 2)
+    np.testing.assert_array_equal(bases[:, 0], one)  # the same draws: one base is where it always was
+    for env in bases:
+        cells = set(map(tuple, env))
+        assert len(cells) == count and cells <= CORNERS  # distinct, each one cell inside a corner of the map
+        if count > 1:
+            assert tuple(env[1]) == OPPOSITE[tuple(env[0])]  # the second base: the first's opposite corner
+
+
+def test_the_drones_start_at_the_first_base_and_call_it_home():
+    d = make(bases=4, envs=8, seed=2)
+    cells = d.bases.to_numpy()[:, 0]
+    np.testing.assert_array_equal(np.floor(d.pos.to_numpy()[:, 0] / d.cell).astype(int), cells)
+    assert np.all(d.home.to_numpy() == 0)
+
+
+def test_a_drone_with_no_fire_heads_for_its_nearest_base():
+    d = make(bases=4)
+    for b in range(4):
+        x = np.array(centre_m(d, b))
+        put(d, tuple(x + (np.array(AWAY) - x) * 0.3))  # a third of the way from base b to the middle
+        d.assign_fire_goals()  # no burning cell: each drone is sent home
+        assert d.home.to_numpy()[0, 0] == b
+        np.testing.assert_allclose(d.goal.to_numpy()[0, 0], d.bases.to_numpy()[0, b] + 0.5)
+
+
+def test_the_tank_refills_at_a_second_base():
+    d = make(bases=2, use_water_limit=True)
+    d.set_water(np.zeros((1, 1), np.float32))
+    put(d, AWAY)
+    fly_still(d, 5)
+    assert d.water.to_numpy()[0, 0] == 0.0
+    put(d, centre_m(d, 1))
+    fly_still(d, 30)
+    assert d.water.to_numpy()[0, 0] == d.capacity
+
+
+def test_the_battery_is_swapped_at_a_second_base_and_the_way_home_is_to_the_nearest():
+    d = make(bases=2, energy=EnergyConfig(preset="scenario", swap_time=2.0))
+    b = d.battery
+    put(d, AWAY)
+    fly_still(d, 10)
+    left = float(b.charge.to_numpy()[0, 0])
+    assert left < 15000.0
+    put(d, centre_m(d, 1))
+    fly_still(d, 20)
+    assert float(b.charge.to_numpy()[0, 0]) == 15000.0 and int(b.swaps.to_numpy()[0, 0]) == 1
+    one = make(bases=1, energy=EnergyConfig(preset="scenario"))
+
+    def near(drones, b):  # 30 m from base b on both axes, towards the middle of the map
+        c = np.array(centre_m(drones, b))
+        return tuple(c + 30.0 * np.sign(np.array(AWAY) - c))
+
+    put(one, near(one, 0))
+    near_one = energy_home(one)
+    put(d, near(d, 1))
+    assert energy_home(d) == pytest.approx(near_one, rel=1e-6)  # home to the second base, the nearer
+    put(one, near(d, 1))  # the same place, where the only base is the far one
+    assert energy_home(one) > 5.0 * near_one
+
+
+def test_several_bases_need_a_map_of_4_x_4_cells():
+    fire = FireSim(uniform_map(3, 5), ignition=IgnitionConfig(fire_percentage=0.0))
+    with pytest.raises(ValueError, match="drones.bases = 2"):
+        DroneSim(fire, DroneConfig(num_drones=1, bases=2))
+    DroneSim(fire, DroneConfig(num_drones=1, bases=1))
