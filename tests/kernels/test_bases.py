@@ -9,6 +9,7 @@ from roshan.config import ConfigError, DroneConfig, EnergyConfig, IgnitionConfig
 from roshan.config.schema import from_dict
 from roshan.kernels.drones import DroneSim
 from roshan.kernels.fire import FireSim
+from roshan.kernels.render import GROUNDSTATION_COLOUR, DroneOverlay, FrameRenderer
 from roshan.maps import load_map, uniform_map
 
 CORNERS = {(1, 1), (1, 34), (33, 1), (33, 34)}  # one cell inside the corners of 35x36_Woods
@@ -119,3 +120,15 @@ def test_several_bases_need_a_map_of_4_x_4_cells():
     with pytest.raises(ValueError, match="drones.bases = 2"):
         DroneSim(fire, DroneConfig(num_drones=1, bases=2))
     DroneSim(fire, DroneConfig(num_drones=1, bases=1))
+
+
+def test_the_frames_outline_every_base():
+    d = make(bases=4)
+    frame = FrameRenderer(d.fire, env=0, cell_px=10, particles=False, backend="raster", wind_arrow=False).render(
+        overlay=DroneOverlay(d, 0))
+    white = np.all(frame == GROUNDSTATION_COLOUR, axis=-1)  # the bases' outlines, nothing else is white
+    cells = np.zeros_like(white)
+    for i, j in d.bases.to_numpy()[0]:
+        assert white[i * 10, j * 10 + 5] and white[i * 10 + 9, j * 10 + 5], (i, j)  # its top and bottom edges
+        cells[i * 10:(i + 1) * 10, j * 10:(j + 1) * 10] = True
+    assert not np.any(white & ~cells)
