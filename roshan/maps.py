@@ -519,8 +519,10 @@ def initial_fire_count(num_cells: int, fire_percentage: float) -> int:
     return int(np.float32(num_cells) * np.float32(fire_percentage))
 
 
-# The groundstation sits one cell inside a map corner (docs/model/agents.md §4.1): rows 1 and rows - 2 must be cells.
+# The groundstation sits one cell inside a map corner (docs/model/agents.md §4.1): rows 1 and rows - 2 must be cells;
+# several bases sit in distinct corners, so rows 1 and rows - 2 must differ.
 MIN_DRONE_MAP_SIDE = 3
+MIN_BASES_MAP_SIDE = 4
 
 
 def check_explorer_map(m: LandCoverMap, num_explorers: int) -> None:
@@ -533,9 +535,10 @@ def check_explorer_map(m: LandCoverMap, num_explorers: int) -> None:
                        f"planner.num_explorers to at most {side}, or use a larger map")
 
 
-def check_drone_map(m: LandCoverMap, fire_percentage: float, fights_fire: bool, who: str) -> None:
+def check_drone_map(m: LandCoverMap, fire_percentage: float, fights_fire: bool, who: str, bases: int = 1) -> None:
     """Refuse a map on which ``who`` (an env's description) cannot run a meaningful episode, with a MapError naming
-    the map and why: smaller than 3 x 3 cells (no cell for the groundstation), and where the drones' objective is
+    the map and why: smaller than 3 x 3 cells (no cell for the groundstation), smaller than 4 x 4 with several
+    ``bases`` (``drones.bases``: no distinct corners for them), and where the drones' objective is
     to put fires out (``fights_fire``), no cell that can burn, or too few cells for ``fire_percentage`` to light
     any fire. Without the refusal such episodes ended at once with nothing lit and counted as successes.
 
@@ -545,6 +548,10 @@ def check_drone_map(m: LandCoverMap, fire_percentage: float, fights_fire: bool, 
     if m.rows < MIN_DRONE_MAP_SIDE or m.cols < MIN_DRONE_MAP_SIDE:
         raise MapError(f"{where} is too small for {who}: the groundstation sits one cell inside a corner, so a map "
                        f"needs at least {MIN_DRONE_MAP_SIDE} x {MIN_DRONE_MAP_SIDE} cells")
+    if bases > 1 and min(m.rows, m.cols) < MIN_BASES_MAP_SIDE:
+        raise MapError(f"{where} is too small for {who} with drones.bases = {bases}: the bases sit one cell inside "
+                       f"distinct corners, so a map needs at least {MIN_BASES_MAP_SIDE} x {MIN_BASES_MAP_SIDE} cells; "
+                       "set drones.bases = 1")
     if not fights_fire:
         return
     if ignitable_fraction(m) == 0.0:

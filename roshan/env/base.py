@@ -88,7 +88,7 @@ class VectorEnvCore(gym.vector.VectorEnv):
         """Refuse a map too small for drones, or one where no fire can start when fires are the objective
         (MapError); warn where no fire is lit at a reset on purpose (``ignition.fire_percentage = 0``)."""
         pct = self.config.ignition.fire_percentage
-        check_drone_map(self.land, pct, self.fights_fire, self.level_name())
+        check_drone_map(self.land, pct, self.fights_fire, self.level_name(), self.config.drones.bases)
         if self.fights_fire and pct == 0:
             warnings.warn(f"{self.level_name()}: ignition.fire_percentage = 0 lights no fire at a reset; an episode "
                           "whose fires are not lit by hand (FireSim.ignite_cells) runs until its time limit and "

@@ -17,6 +17,7 @@ from roshan.kernels import rng, tasks
 from roshan.kernels.arrays import int32_array
 from roshan.kernels.battery import Battery, FinalApproach, NoApproach, NoBattery
 from roshan.kernels.fire import FireSim
+from roshan.maps import MIN_BASES_MAP_SIDE
 
 BIN = 0.05  # action resolution with use_vel_bins: 41 levels in [-1, 1]
 # The corners of the bases after the first (docs/model/agents.md §4.1), as masks XORed onto the first base's corner id
@@ -61,9 +62,11 @@ class DroneSim:
         self.ring = min(self.cell / 2.0 - margin, max(2.0 * cfg.drone_size, 0.35 * self.cell))
         self.start_gs = cfg.groundstation_start_percentage
         self.num_bases = B = cfg.bases
-        if B > 1 and min(self.rows, self.cols) < 4:
-            raise ValueError(f"drones.bases = {B} needs a map of at least 4 x 4 cells (the bases sit one cell inside "
-                             f"distinct corners); this one has {self.rows} x {self.cols}: set drones.bases = 1")
+        if B > 1 and min(self.rows, self.cols) < MIN_BASES_MAP_SIDE:
+            side = MIN_BASES_MAP_SIDE
+            raise ValueError(f"drones.bases = {B} needs a map of at least {side} x {side} cells (the bases sit one "
+                             f"cell inside distinct corners); this one has {self.rows} x {self.cols}: "
+                             "set drones.bases = 1")
         # Water (docs/model/agents.md §14, newest code). Every use sits behind ti.static(self.use_water), so without the
         # limit the kernels are the ones of an infinite tank.
         self.use_water = cfg.use_water_limit

@@ -52,7 +52,7 @@ def check_maps(maps: Sequence[str], trained: Config, overrides: Sequence[str] = 
             land = load_map(cfg.map.name, band=cfg.map.band or None, rows=cfg.map.uniform_rows,
                             cols=cfg.map.uniform_cols)
             check_drone_map(land, cfg.ignition.fire_percentage, cfg.train.level.fights_fire(cfg),
-                            f"a {cfg.train.algo} evaluation")
+                            f"a {cfg.train.algo} evaluation", cfg.drones.bases)
             kit_of(cfg).check_map(land, cfg)
         except MapError as exc:
             raise MapError(f"--maps: map {spec!r} cannot be evaluated: {exc}") from exc

@@ -10,7 +10,7 @@ from roshan.config.schema import from_dict
 from roshan.kernels.drones import DroneSim
 from roshan.kernels.fire import FireSim
 from roshan.kernels.render import GROUNDSTATION_COLOUR, DroneOverlay, FrameRenderer
-from roshan.maps import load_map, uniform_map
+from roshan.maps import MapError, check_drone_map, load_map, uniform_map
 
 CORNERS = {(1, 1), (1, 34), (33, 1), (33, 34)}  # one cell inside the corners of 35x36_Woods
 OPPOSITE = {(1, 1): (33, 34), (1, 34): (33, 1), (33, 1): (1, 34), (33, 34): (1, 1)}
@@ -120,6 +120,10 @@ def test_several_bases_need_a_map_of_4_x_4_cells():
     with pytest.raises(ValueError, match="drones.bases = 2"):
         DroneSim(fire, DroneConfig(num_drones=1, bases=2))
     DroneSim(fire, DroneConfig(num_drones=1, bases=1))
+    with pytest.raises(MapError, match="drones.bases = 2"):  # the envs' check, before any simulator is built
+        check_drone_map(uniform_map(3, 5), 0.0, False, "a test", bases=2)
+    check_drone_map(uniform_map(3, 5), 0.0, False, "a test", bases=1)
+    check_drone_map(uniform_map(4, 4), 0.0, False, "a test", bases=4)
 
 
 def test_the_frames_outline_every_base():

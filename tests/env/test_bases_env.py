@@ -1,0 +1,44 @@
+"""Several bases in the planner level's greedy episodes (``drones.bases``): drones sent home head for a base and
+restock there, and the episode runs on with every kernel compiled for two bases."""
+
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from roshan.config import Config, DroneConfig, EnergyConfig, IgnitionConfig, PlannerConfig, WindConfig
+from roshan.env.planner import PlannerVectorEnv
+
+MODEL = str(Path(__file__).resolve().parents[2] / "models" / "fly_simple")
+
+
+def test_greedy_drones_go_home_to_either_base():
+    drones = DroneConfig(num_drones=3, bases=2, use_water_limit=True, water_capacity=2.0,
+                         energy=EnergyConfig(preset="scenario", capacity=6000.0))
+    cfg = Config(ignition=IgnitionConfig(fire_percentage=0.05, clusters=2), drones=drones, wind=WindConfig(speed=0.0))
+    pc = PlannerConfig(interval=1, fly_model=MODEL, explorer_model=MODEL, num_explorers=2, greedy_home="fixed")
+    env = PlannerVectorEnv(2, cfg, pc, evaluation=True, controller="greedy", seed=3)
+    env.reset(seed=3)
+    dr = env.drones
+    # drone 0 of each env: 3 cells from the second base towards the middle of the map, its tank empty
+    pos, vel = dr.pos.to_numpy(), dr.vel.to_numpy()
+    second = dr.bases.to_numpy()[:, 1] + 0.5
+    middle = np.array([dr.rows, dr.cols]) / 2.0
+    pos[:, 0] = (second + 3.0 * np.sign(middle - second)) * dr.cell
+    vel[:, 0] = 0.0
+    dr.set_state(pos, vel)
+    water = dr.water.to_numpy()
+    water[:, 0] = 0.0
+    dr.set_water(water)
+    homes, refilled = set(), np.zeros(2, bool)
+    for _ in range(120):
+        env.step(torch.zeros((2, 3), dtype=torch.long))
+        home, going = dr.home.to_numpy(), dr.refilling.to_numpy() == 1
+        centres = np.take_along_axis(dr.bases.to_numpy(), home[..., None], axis=1) + 0.5
+        np.testing.assert_allclose(dr.goal.to_numpy()[going], centres[going])  # flying home: to its home base
+        homes |= set(home[:, 0][going[:, 0]].tolist())  # drone 0's
+        refilled |= dr.water.to_numpy()[:, 0] == drones.water_capacity
+        if refilled.all():
+            break
+    assert homes == {1} and refilled.all()  # drone 0 went to the base nearest to it and restocked there
+    env.close()
