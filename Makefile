@@ -86,15 +86,16 @@ demo: install
 	@echo "      batteries, where the planner schedules returns, models/planner_endurance 78 % against the"
 	@echo "      resource-aware greedy's 71 % (README, 'What to try next'; BENCHMARKS.md)."
 
-# One process: two pytest-xdist workers (a file to each) took 1,281 s on the 2-core machine against 1,263 s
-# serially (Taichi's kernels already use both cores), so the suite runs serially.
+# Two pytest-xdist workers, a test file to each: with the suite compiling fast (tests/conftest.py), compiling no
+# longer keeps both cores busy, and a cold suite on the 2-core machine took 850 s with two workers against 1,724 s in
+# one process (BENCHMARKS.md, "Test suite"). Each worker resets Taichi after each file, as one process does.
 test: install
-	$(PYTHON) -m pytest -q --durations=15
+	$(PYTHON) -m pytest -q -n 2 --dist loadfile --durations=15
 
 # The edit loop: everything but the tests marked slow (each took 5 s or more in a full run on the 2-core machine:
 # training, subprocesses, long physics); CI runs them all.
 test-fast: install
-	$(PYTHON) -m pytest -q -m "not slow"
+	$(PYTHON) -m pytest -q -n 2 --dist loadfile -m "not slow"
 
 lint: install
 	$(PYTHON) -m ruff check .
