@@ -432,9 +432,7 @@ class DroneSim:
         n = 0
         goal = self.base_centre(e, 0)
         for corner in ti.static(range(4)):
-            ci = ti.static(1 if corner < 2 else -2)
-            cj = ti.static(1 if corner % 2 == 0 else -2)
-            cell = ti.Vector([ci if ci > 0 else self.rows + ci, cj if cj > 0 else self.cols + cj])
+            cell = self.corner_cell(corner)
             if cell[0] != gs[0] or cell[1] != gs[1]:
                 if n == pick:
                     goal = ti.cast(cell, ti.f32) + 0.5
