@@ -12,6 +12,7 @@ The checker is plain functions over a ``{module: [Import, ...]}`` dict, so it is
 """
 
 import ast
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -274,3 +275,14 @@ def test_the_rooms_that_mixed_trades_stay_small():
     lines = {name: len((REPO / name).read_text().splitlines())
              for name in ("roshan/kernels/fire.py", "roshan/runs/train.py")}
     assert lines["roshan/kernels/fire.py"] <= 800 and lines["roshan/runs/train.py"] <= 350, lines
+
+
+def test_the_battery_stays_one_component():
+    """The battery is one component (kernels/battery.py) that the rest asks through its interface, so few modules
+    need to know there is one; and the kernels' compile-time branches stay few (each multiplies the variants)."""
+    package = REPO / "roshan"
+    knowing = sorted(str(p.relative_to(REPO)) for p in package.rglob("*.py")
+                     if re.search(r"energy|battery", p.read_text(), re.IGNORECASE))
+    assert "roshan/kernels/battery.py" in knowing and len(knowing) <= 10, knowing
+    branches = sum(p.read_text().count("if ti.static(") for p in (package / "kernels").rglob("*.py"))
+    assert 0 < branches <= 60, branches

@@ -167,11 +167,10 @@ class PlannerConfig(Section):
         return replace(drones, num_drones=self.num_explorers, max_speed=self.explorer_speed,
                        view_range=self.explorer_view_range, energy=EnergyConfig())
 
-    def inert(self, battery: bool) -> list[str]:
-        """Settings that change nothing (or nothing useful) here, each as a warning line; ``battery``:
-        the drones carry one (``drones.energy.enabled``)."""
+    def inert(self, drones: DroneConfig) -> list[str]:
+        """Settings that change nothing (or nothing useful) with ``drones``, each as a warning line."""
         out = []
-        if self.planner_resources and not battery:
+        if self.planner_resources and not drones.energy.enabled:
             out.append("planner.planner_resources = true does nothing while drones.energy.preset is off: the return "
                        "rule watches the drones' batteries")
         if self.max_candidates == 1:

@@ -19,7 +19,7 @@ from roshan.env.base import VectorEnvCore
 from roshan.env.fly import fly_obs_views
 from roshan.kernels import observe
 from roshan.kernels.launch import PreparedLaunch
-from roshan.kernels.planner import obs_layout
+from roshan.kernels.planner import obs_layout, obs_parts
 from roshan.kernels.pool import take_planner_sims
 from roshan.maps import check_explorer_map
 from roshan.runtime import ensure_taichi, torch_device
@@ -71,12 +71,12 @@ class PlannerVectorEnv(VectorEnvCore):
                                                                       key="planner.explorer_model")
         ex_frames = self.explorer_policy.frames if self.explorer_policy else 1
         super().__init__(num_envs, config, seed, render_mode)
-        for line in pc.inert(self.config.drones.energy.enabled):  # the same text warns once (Python's default filter)
+        for line in pc.inert(self.config.drones):  # the same text warns once (Python's default filter)
             warnings.warn(f"{self.level_name()}: {line}", stacklevel=2)
         n, m = self.num_drones, pc.num_explorers
         self.interval = pc.interval
         self._define_spaces(n)
-        self.layout = obs_layout(n, self.max_candidates, energy=self.has_energy)
+        self.layout = obs_layout(self.config.drones, self.max_candidates)
         self._allocate_buffers((max(end for _, end in self.layout.values()),), ())
         dev = self.device
         self._fly_buf = torch.zeros((num_envs, n, self.fly_policy.frames, observe.frame_width(n)), device=dev)
@@ -94,11 +94,6 @@ class PlannerVectorEnv(VectorEnvCore):
         """The drones' checks of every level, and a map side the explorers' stripes can share."""
         super()._check_map()
         check_explorer_map(self.land, self.planner_config.num_explorers)
-
-    @property
-    def has_energy(self) -> bool:
-        """Drones with a battery (``drones.energy``): the observation has an ``energy`` part."""
-        return self.config.drones.energy.enabled
 
     def level_name(self) -> str:
         return f"PlannerVectorEnv ({self.controller})"
@@ -120,29 +115,19 @@ class PlannerVectorEnv(VectorEnvCore):
         n, pc = self.num_drones, self.planner_config
         m, k = pc.num_explorers, pc.max_candidates or self.land.rows * self.land.cols + 1
         ex_frames = self.explorer_policy.frames if self.explorer_policy else 1
-        width = max(end for _, end in obs_layout(n, k, energy=self.has_energy).values())
+        width = max(end for _, end in obs_layout(self.config.drones, k).values())
         stacks = n * self.fly_policy.frames * observe.frame_width(n) + m * ex_frames * observe.frame_width(m)
         return self._core_buffer_bytes(width, 1) + self.num_envs * 4 * (stacks + 2 * m + 2 * n)  # + actions
 
     def _define_spaces(self, n: int) -> None:
-        box, k = gym.spaces.Box, self.max_candidates
+        parts = obs_parts(self.config.drones, self.max_candidates)
         self.single_observation_space = gym.spaces.Dict({
-            "drones": box(-np.inf, np.inf, (n, 2), np.float32),  # outside [-1, 1] when a drone leaves the map
-            "goals": box(-1.0, 1.0, (n, 2), np.float32),
-            "water": box(0.0, 1.0, (n, 1), np.float32),
-            # with a battery: the charge and what the quickest flight home needs, as fractions of a full one
-            **({"energy": box(0.0, 1.0, (n, 2), np.float32)} if self.has_energy else {}),
-            "fires": box(-1.0, 1.0, (k, 2), np.float32),
-            "fires_mask": box(0.0, 1.0, (k,), np.float32),
-            "globals": box(-2.0, 1.0, (5,), np.float32),
-        })
-        self.single_action_space = gym.spaces.MultiDiscrete(np.full(n, k))
+            name: gym.spaces.Box(low, high, shape, np.float32) for name, (shape, low, high) in parts.items()})
+        self.single_action_space = gym.spaces.MultiDiscrete(np.full(n, self.max_candidates))
         self._batched_spaces()
 
     def _views(self, buf: torch.Tensor) -> dict[str, torch.Tensor]:
-        n, k = self.num_drones, self.max_candidates
-        shapes = {"drones": (n, 2), "goals": (n, 2), "water": (n, 1), "energy": (n, 2), "fires": (k, 2),
-                  "fires_mask": (k,), "globals": (5,)}
+        shapes = {name: shape for name, (shape, _, _) in obs_parts(self.config.drones, self.max_candidates).items()}
         return {name: buf[:, a:b].unflatten(1, shapes[name]) for name, (a, b) in self.layout.items()}
 
     def _kernel_obs(self):

@@ -25,7 +25,7 @@ import math
 import numpy as np
 import taichi as ti
 
-from roshan.config import PlannerConfig
+from roshan.config import DroneConfig, PlannerConfig
 from roshan.episode import BURNOUT, LOST, TIMEOUT
 from roshan.kernels import observe
 from roshan.kernels.battery import NoReturn
@@ -53,16 +53,24 @@ def planner_time_limit(rows: int, cols: int, cell: float, dt: float, v_max: floa
     return max(math.ceil((length / v_max + fires * dt) / dt), math.ceil(2 * t_phys))
 
 
-def obs_layout(num_drones: int, max_candidates: int, energy: bool = False) -> dict[str, tuple[int, int]]:
-    """(start, end) column of every observation part in the flat row; with a battery (``energy``) each drone's
-    charge and the charge its quickest flight home needs, both as fractions of a full battery, follow the water."""
-    n, k = num_drones, max_candidates
-    parts = {"drones": 2 * n, "goals": 2 * n, "water": n, **({"energy": 2 * n} if energy else {}),
-             "fires": 2 * k, "fires_mask": k, "globals": 5}
+# Every part of the planner observation in the order of the flat row: name -> (shape per row with n drones and k
+# candidates, low, high). Positions leave [-1, 1] when a drone leaves the map; the globals' fire count is -2 .. 1.
+def obs_parts(drones: DroneConfig, max_candidates: int) -> dict[str, tuple[tuple[int, ...], float, float]]:
+    """The planner observation's parts for ``drones`` (its count and whether it carries a battery) and
+    ``max_candidates`` K: name -> (shape, low, high). With a battery each drone's charge and the charge its quickest
+    flight home needs, both as fractions of a full battery, follow the water."""
+    n, k = drones.num_drones, max_candidates
+    return {"drones": ((n, 2), -math.inf, math.inf), "goals": ((n, 2), -1.0, 1.0), "water": ((n, 1), 0.0, 1.0),
+            **({"energy": ((n, 2), 0.0, 1.0)} if drones.energy.enabled else {}),
+            "fires": ((k, 2), -1.0, 1.0), "fires_mask": ((k,), 0.0, 1.0), "globals": ((5,), -2.0, 1.0)}
+
+
+def obs_layout(drones: DroneConfig, max_candidates: int) -> dict[str, tuple[int, int]]:
+    """(start, end) column of every part of :func:`obs_parts` in the flat row."""
     out, start = {}, 0
-    for name, width in parts.items():
-        out[name] = (start, start + width)
-        start += width
+    for name, (shape, _, _) in obs_parts(drones, max_candidates).items():
+        out[name] = (start, start + math.prod(shape))
+        start = out[name][1]
     return out
 
 
@@ -98,7 +106,7 @@ class PlannerKernels(EpisodeKernels):
         self.K = max_candidates = pc.max_candidates or fire.num_cells + 1
         self.fly_frames, self.explore_frames = fly_frames, explore_frames
         self.use_water, self.use_energy = drones.use_water, drones.use_energy
-        self.layout = obs_layout(drones.num_drones, max_candidates, energy=self.use_energy)
+        self.layout = obs_layout(drones.cfg, max_candidates)
         self.o_drones, self.o_goals, self.o_water, self.o_fires, self.o_mask, self.o_globals = (
             self.layout[k][0] for k in ("drones", "goals", "water", "fires", "fires_mask", "globals"))
         self.o_energy = self.layout["energy"][0] if self.use_energy else 0

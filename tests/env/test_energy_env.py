@@ -308,4 +308,4 @@ def test_options_that_do_nothing_without_a_battery_say_so_once():
                   "planner.max_candidates = 1 lists the groundstation alone"):
         assert sum(words in line for line in said) == 1, said
     assert DroneConfig(energy=EnergyConfig(preset="scenario", approach=2.0)).inert() == []
-    assert PlannerConfig(planner_resources=True).inert(battery=True) == []
+    assert PlannerConfig(planner_resources=True).inert(DroneConfig(energy=EnergyConfig(preset="scenario"))) == []
