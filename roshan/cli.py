@@ -780,10 +780,14 @@ def bench_env(env_counts, drones, fire_percentages, policies, min_env_steps, jso
 @click.option("--against", type=click.Path(file_okay=False, exists=True), default=None,
               help="Another checkout (say, a git worktree of an older commit) timed with the same slices in the "
                    "same run.")
+@click.option("--spec", "spec_path", default="configs/experiments/thesis.yaml", show_default=True,
+              help="The experiment spec whose conditions are timed. A relative path is read in each checkout, so "
+                   "each code runs its own spec; an existing file given by its absolute path is read by both, so "
+                   "both codes run one workload (a spec whose settings or models changed times other work).")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None)
 @click.option("--threads", type=click.IntRange(min=1), default=1, show_default=True, callback=_check_threads,
               help="CPU threads of Taichi and torch in each slice (the experiment runner's --threads 1).")
-def bench_train(families, modes, updates, rounds, against, json_path, threads):
+def bench_train(families, modes, updates, rounds, against, spec_path, json_path, threads):
     """Training speed: a fixed slice of each recipe family (env-steps/s all told, the split into collection,
     update and the rest, the periodic evaluation's cost, peak memory), in each torch mode."""
     from roshan.tools import train_bench as tb
@@ -792,10 +796,13 @@ def bench_train(families, modes, updates, rounds, against, json_path, threads):
     if bad:
         _fail(ValueError(f"bench train: unknown {bad}; families: {', '.join(tb.FAMILIES)}; modes: "
                          f"{', '.join(tb.MODES)}"))
+    if Path(spec_path).is_absolute() and not Path(spec_path).is_file():
+        _fail(ValueError(f"bench train: --spec {spec_path}: no such file (an absolute path is read by both codes)"))
     click.echo(tb.HEADER, err=True)
     with reported(RuntimeError):
         report = tb.bench_training(families, modes, updates, rounds, Path(against) if against else None,
-                                   threads=threads, on_row=lambda r: click.echo(tb.format_row(r), err=True))
+                                   spec=spec_path, threads=threads,
+                                   on_row=lambda r: click.echo(tb.format_row(r), err=True))
     click.echo("\n".join(tb.ratios(report)))
     if json_path:
         Path(json_path).write_text(json.dumps(report, indent=1))

@@ -43,3 +43,28 @@ def test_unknown_families_and_modes_are_refused_by_name():
 
     out = CliRunner().invoke(main, ["bench", "train", "--families", "E6,E9", "--modes", "fast"])
     assert out.exit_code == 1 and "unknown ['E9', 'fast']" in out.output
+
+
+def test_a_relative_spec_is_each_checkouts_own_and_an_absolute_one_is_shared(tmp_path, monkeypatch):
+    """Each code times its own spec unless one spec file is named for both: a spec's settings and models change
+    with the code (a new low level, another step limit), so only a shared spec compares code on one workload."""
+    read = []
+    monkeypatch.setattr(tb, "run_slice", lambda checkout, spec, *a: read.append(checkout / spec) or
+                        {"steps_per_s": 1.0})
+    other = tmp_path / "old"
+    tb.bench_training(["planner"], ["vendor"], 1, against=other)
+    here = Path(tb.__file__).resolve().parents[2]
+    assert read == [here / "configs/experiments/thesis.yaml", other.resolve() / "configs/experiments/thesis.yaml"]
+    read.clear()
+    tb.bench_training(["planner"], ["vendor"], 1, against=other, spec=SPEC)
+    assert read == [Path(SPEC), Path(SPEC)]
+
+
+def test_a_shared_spec_that_does_not_exist_is_refused_by_name(tmp_path):
+    from click.testing import CliRunner
+
+    from roshan.cli import main
+
+    missing = tmp_path / "nope.yaml"
+    out = CliRunner().invoke(main, ["bench", "train", "--families", "planner", "--spec", str(missing)])
+    assert out.exit_code == 1 and f"--spec {missing}: no such file" in out.output
