@@ -128,6 +128,20 @@ class DroneSim:
         mask = self._all if mask is None else int32_array(mask, (self.num_envs,), "reset mask")
         self._reset(mask)
 
+    def farthest_from_bases(self) -> float:
+        """Metres from the farthest cell centre of the map to its nearest base, the largest over the envs: the
+        farthest a fire can be from where a drone restocks (read after a reset has placed the bases)."""
+        placed = np.unique(self.bases.to_numpy(), axis=0)  # the envs' distinct placements (a corner each)
+        bases = (placed.astype(np.float64) + 0.5) * self.cell  # (P, B, 2) base centres
+        rows, cols = np.meshgrid((np.arange(self.rows) + 0.5) * self.cell, (np.arange(self.cols) + 0.5) * self.cell,
+                                 indexing="ij")
+        cells = np.stack([rows.ravel(), cols.ravel()], axis=-1)  # (C, 2)
+        far = 0.0
+        for env_bases in bases:  # one placement at a time: C x B distances
+            gaps = np.linalg.norm(cells[:, None, :] - env_bases[None, :, :], axis=-1)
+            far = max(far, float(gaps.min(axis=1).max()))
+        return far
+
     def move(self, actions) -> None:
         """Apply (E, N, 2) float32 actions to every drone and refresh neighbours and collisions."""
         self._move_all(actions)

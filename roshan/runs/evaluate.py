@@ -364,10 +364,10 @@ def evaluate_run(target: str | Path, episodes: int = 200, seed: int = 0, num_env
         if baseline is not None:
             base_env, act = kit.baseline(cfg, env, baseline, E, seed, make_env)
             base_eps = run_episodes(base_env, act, episodes, seed, progress_bar=progress_bar)
+        notes = setting_notes(cfg.drones, env.drones.farthest_from_bases())
         env.close()
         say = _say if progress_bar else _quiet
         who, reasons, dt = f"{cfg.train.algo} policy", env.failure_reasons, cfg.fire.dt
-        notes = setting_notes(cfg.drones, env.drones.rows, env.drones.cols, env.drones.cell)
         summary = write_outputs(eps, out, f"{run_dir.name} ({path.stem}, {len(eps['time'])} episodes, seed {seed})",
                                 provenance, reasons, dt, who, say, notes)
         _note_simple_policy(cfg, summary, out)

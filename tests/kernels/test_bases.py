@@ -136,3 +136,12 @@ def test_the_frames_outline_every_base():
         assert white[i * 10, j * 10 + 5] and white[i * 10 + 9, j * 10 + 5], (i, j)  # its top and bottom edges
         cells[i * 10:(i + 1) * 10, j * 10:(j + 1) * 10] = True
     assert not np.any(white & ~cells)
+
+
+@pytest.mark.parametrize("count, far_cells", [(1, np.hypot(33, 34)),  # base (1,1) centre to cell (34,35)'s
+                                              (2, np.hypot(33, 1)),  # bases (1,1), (33,34): cell (34,0)'s
+                                              (4, np.hypot(16, 16))])  # the four corners: cell (17,17)'s
+def test_the_farthest_cell_is_measured_to_its_nearest_base(count, far_cells):
+    """What the battery's range note compares with (35 x 36 cells of 10 m, bases one cell inside corners; the
+    distances from the cell centres worked out by hand, equal for every first corner by the map's symmetry)."""
+    assert make(bases=count, envs=8, seed=3).farthest_from_bases() == pytest.approx(10.0 * far_cells)

@@ -3,6 +3,7 @@ and a summary with one row per map; maps that cannot be evaluated and single-eva
 anything is written."""
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -152,8 +153,8 @@ def test_results_that_cannot_mean_anything_say_so(tmp_path):
 def test_fires_out_of_the_battery_s_range_are_named():
     reach = load_config(None, ["drones.energy.preset=scenario"]).drones.battery_reach()
     assert reach == pytest.approx(15000 / 170 * 10 * 2**0.5 / 2)  # the README's 88 s at full speed, out and back
-    assert reach_note(reach, 36, 35, 10.0) is None  # scenario is scaled to 35x36_Woods: every cell in reach
-    note = reach_note(reach, 100, 110, 10.0)
+    assert reach_note(reach, 10.0 * math.hypot(34, 33)) is None  # scenario is scaled to 35x36_Woods: all in reach
+    note = reach_note(reach, 1458.0)
     assert note.startswith("fires out of the battery's range: a full battery takes a drone at most 624 m out and "
-                           "back, and the map's far corner is 1444 m from the groundstation")
-    assert load_config().drones.battery_reach() is None and reach_note(None, 100, 110, 10.0) is None
+                           "back, and the farthest cell is 1458 m from its nearest base")
+    assert load_config().drones.battery_reach() is None and reach_note(None, 1458.0) is None

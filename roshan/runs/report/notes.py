@@ -4,8 +4,6 @@ never left the base, fires out of the battery's range, a ratio of TTEs with no s
 A note is one line; the tables print them under themselves, and a map suite lists them under its rows.
 """
 
-import math
-
 from roshan.config import DroneConfig
 
 
@@ -26,24 +24,21 @@ def controller_notes(summary: dict, who: str) -> list[str]:
     return notes
 
 
-def setting_notes(drones: DroneConfig, rows: int, cols: int, cell: float) -> list[str]:
+def setting_notes(drones: DroneConfig, farthest: float) -> list[str]:
     """The notes of an evaluation's setting, under every controller's table: :func:`reach_note` for ``drones`` on a
-    map of ``rows`` x ``cols`` cells of ``cell`` metres."""
-    reach = reach_note(drones.battery_reach(), rows, cols, cell)
+    map whose farthest cell is ``farthest`` metres from its nearest base."""
+    reach = reach_note(drones.battery_reach(), farthest)
     return [reach] if reach else []
 
 
-def reach_note(reach: float | None, rows: int, cols: int, cell: float) -> str | None:
-    """A note where part of the map lies out of the battery's range: the groundstation sits one cell inside a
-    corner, so its opposite corner is the farthest a fire can be; None without a battery or where every cell is in
-    reach."""
-    if reach is None:
-        return None
-    far = cell * math.hypot(rows - 3, cols - 3)
-    if reach >= far:
+def reach_note(reach: float | None, farthest: float) -> str | None:
+    """A note where part of the map lies out of the battery's range: ``farthest`` is the distance in metres from
+    the farthest cell to its nearest base (with one base in a corner, the opposite corner; with four, the
+    middle). None without a battery or where every cell is in reach."""
+    if reach is None or reach >= farthest:
         return None
     return (f"fires out of the battery's range: a full battery takes a drone at most {reach:.0f} m out and back, and "
-            f"the map's far corner is {far:.0f} m from the groundstation; a fire farther away cannot be put out")
+            f"the farthest cell is {farthest:.0f} m from its nearest base; a fire farther away cannot be put out")
 
 
 def ratio_is_meaningful(policy: dict, baseline: dict) -> bool:
