@@ -166,10 +166,39 @@ class DroneConfig(Section):
                                   "random corner (the drones start there), the others in the opposite corner, then "
                                   "the other corner of the first's row, then that of its column (docs/model/agents.md "
                                   "§4.1); a drone restocks at any of them and flies home to the nearest")
+    base_cells: str = ""  # the bases' cells "row,col; row,col" in place of the corner rule (drones.bases of them)
     use_water_limit: bool = False  # finite tank, newest code (docs/model/agents.md §14); off in the thesis experiments
     water_capacity: float = num(4.0, 0.0, lo_open=True, doc="tank size in drops (one drop puts out one cell)")
     recharge_time: float = num(2.0, 0.0, doc="seconds an empty tank takes to refill at the groundstation")
     energy: EnergyConfig = field(default_factory=EnergyConfig)
+
+    def __post_init__(self):
+        super().__post_init__()
+        cells = self.explicit_bases  # a malformed list is refused here, naming the key
+        if cells and len(cells) != self.bases:
+            raise ConfigError(f"DroneConfig: drones.base_cells lists {len(cells)} cell(s) ({self.base_cells!r}) but "
+                              f"drones.bases = {self.bases}: set drones.bases = {len(cells)}")
+
+    @property
+    def explicit_bases(self) -> tuple[tuple[int, int], ...]:
+        """The cells (row, col) of ``base_cells``, the first the drones' start; () for the corner rule."""
+        text = self.base_cells.replace(" ", "")
+        if not text:
+            return ()
+        cells = []
+        for part in text.strip(";").split(";"):
+            try:
+                row, col = (int(v) for v in part.split(","))
+            except ValueError:
+                raise ConfigError(f"DroneConfig: drones.base_cells = {self.base_cells!r}: expected cells as "
+                                  f"'row,col; row,col' (whole numbers), got {part!r}") from None
+            if row < 0 or col < 0:
+                raise ConfigError(f"DroneConfig: drones.base_cells = {self.base_cells!r}: cell {part!r} has a "
+                                  "negative index")
+            cells.append((row, col))
+        if len(set(cells)) != len(cells):
+            raise ConfigError(f"DroneConfig: drones.base_cells = {self.base_cells!r} names a cell twice")
+        return tuple(cells)
 
     # The keys that shape a network seeing the whole fleet in one row (the planner's): the number of drones, and
     # whether they carry a battery (a property of the section: with one the observation has an energy part whatever

@@ -62,7 +62,12 @@ class DroneSim:
         self.ring = min(self.cell / 2.0 - margin, max(2.0 * cfg.drone_size, 0.35 * self.cell))
         self.start_gs = cfg.groundstation_start_percentage
         self.num_bases = B = cfg.bases
-        if B > 1 and min(self.rows, self.cols) < MIN_BASES_MAP_SIDE:
+        self.base_cells = cfg.explicit_bases  # () for the corner rule
+        outside = [c for c in self.base_cells if c[0] >= self.rows or c[1] >= self.cols]
+        if outside:
+            raise ValueError(f"drones.base_cells = {cfg.base_cells!r}: cell(s) {outside} lie outside the map of "
+                             f"{self.rows} x {self.cols} cells (rows 0-{self.rows - 1}, columns 0-{self.cols - 1})")
+        if B > 1 and not self.base_cells and min(self.rows, self.cols) < MIN_BASES_MAP_SIDE:
             side = MIN_BASES_MAP_SIDE
             raise ValueError(f"drones.bases = {B} needs a map of at least {side} x {side} cells (the bases sit one "
                              f"cell inside distinct corners); this one has {self.rows} x {self.cols}: "
@@ -203,15 +208,21 @@ class DroneSim:
     @ti.func
     def place(self, e):
         """The first base one cell inside a random corner, the others in the corners after it
-        (:data:`BASE_CORNER_MASKS`); drones on a ring around their start cell (the first base's)."""
+        (:data:`BASE_CORNER_MASKS`), or all at ``drones.base_cells``; drones on a ring around their start cell (the
+        first base's)."""
         k = rng.key(self.fire.env_key[e], rng.DOMAIN_DRONES, 0)
-        gi = ti.select(rng.uniform(rng.key(k, 0, 0)) < 0.5, 1, self.rows - 2)  # row drawn first
-        gj = ti.select(rng.uniform(rng.key(k, 1, 0)) < 0.5, 1, self.cols - 2)
-        self.bases[e, 0] = ti.Vector([gi, gj])
-        if ti.static(self.num_bases > 1):
-            first = 2 * ti.cast(gi != 1, ti.i32) + ti.cast(gj != 1, ti.i32)
-            for b in ti.static(range(1, self.num_bases)):
-                self.bases[e, b] = self.corner_cell(first ^ BASE_CORNER_MASKS[b])
+        if ti.static(self.base_cells):  # drones.base_cells: where the user put them, the same in every env
+            for b in ti.static(range(self.num_bases)):
+                self.bases[e, b] = ti.Vector([self.base_cells[b][0], self.base_cells[b][1]])
+        else:
+            gi = ti.select(rng.uniform(rng.key(k, 0, 0)) < 0.5, 1, self.rows - 2)  # row drawn first
+            gj = ti.select(rng.uniform(rng.key(k, 1, 0)) < 0.5, 1, self.cols - 2)
+            self.bases[e, 0] = ti.Vector([gi, gj])
+            if ti.static(self.num_bases > 1):
+                first = 2 * ti.cast(gi != 1, ti.i32) + ti.cast(gj != 1, ti.i32)
+                for b in ti.static(range(1, self.num_bases)):
+                    self.bases[e, b] = self.corner_cell(first ^ BASE_CORNER_MASKS[b])
+        gi, gj = self.bases[e, 0][0], self.bases[e, 0][1]
         for d in range(self.num_drones):
             ci = gi
             cj = gj

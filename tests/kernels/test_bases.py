@@ -145,3 +145,30 @@ def test_the_farthest_cell_is_measured_to_its_nearest_base(count, far_cells):
     """What the battery's range note compares with (35 x 36 cells of 10 m, bases one cell inside corners; the
     distances from the cell centres worked out by hand, equal for every first corner by the map's symmetry)."""
     assert make(bases=count, envs=8, seed=3).farthest_from_bases() == pytest.approx(10.0 * far_cells)
+
+
+def test_base_cells_place_the_bases_in_every_env_and_the_drones_start_at_the_first():
+    d = make(bases=3, envs=4, seed=1, base_cells="10,20; 30,5;2,33")
+    np.testing.assert_array_equal(d.bases.to_numpy(), np.tile([[10, 20], [30, 5], [2, 33]], (4, 1, 1)))
+    np.testing.assert_array_equal(np.floor(d.pos.to_numpy()[:, 0] / d.cell).astype(int), [[10, 20]] * 4)
+    put(d, (5.0 * d.cell, 30.0 * d.cell))  # nearest to the third base
+    d.assign_fire_goals()
+    assert d.home.to_numpy()[0, 0] == 2
+
+
+@pytest.mark.parametrize("settings, words", [
+    ({"base_cells": "1,2; 3,4"}, "lists 2 cell(s) ('1,2; 3,4') but drones.bases = 1: set drones.bases = 2"),
+    ({"base_cells": "1;2", "bases": 2}, "expected cells as 'row,col; row,col' (whole numbers), got '1'"),
+    ({"base_cells": "1,2.5"}, "got '1,2.5'"),
+    ({"base_cells": "-1,2"}, "cell '-1,2' has a negative index"),
+    ({"base_cells": "1,2;1,2", "bases": 2}, "names a cell twice")])
+def test_malformed_base_cells_are_refused_by_name(settings, words):
+    with pytest.raises(ConfigError, match="drones.base_cells") as caught:
+        from_dict(DroneConfig, settings)
+    assert words in str(caught.value)
+
+
+def test_base_cells_outside_the_map_are_refused_with_its_size():
+    with pytest.raises(ValueError, match=r"drones.base_cells = '1,1; 35,2': cell\(s\) \[\(35, 2\)\] lie outside "
+                                         r"the map of 35 x 36 cells \(rows 0-34, columns 0-35\)"):
+        make(bases=2, base_cells="1,1; 35,2")
