@@ -196,12 +196,52 @@ def maps_list():
 @maps.command("show")
 @click.argument("name_or_path")
 @click.option("--band", type=click.IntRange(min=1), default=None, help="Band of a multi-band raster.")
-def maps_show(name_or_path, band):
-    """Size in cells and metres, CRS and class histogram of a map."""
+@click.option("--bases", type=click.IntRange(1, 4), default=None,
+              help="Also where drones.bases = N puts the groundstations on this map, for each corner the first may "
+                   "draw, and the farthest cell from its nearest base.")
+@click.option("--base-cells", default=None, metavar="'ROW,COL; ROW,COL'",
+              help="As --bases, for bases at these cells (drones.base_cells): checked against the map.")
+def maps_show(name_or_path, band, bases, base_cells):
+    """Size in cells and metres, CRS and class histogram of a map (and, with --bases or --base-cells, where the
+    groundstations go)."""
     from roshan.maps import describe_map, load_map
 
     with reported():
-        click.echo(describe_map(load_map(name_or_path, band=band)))
+        land = load_map(name_or_path, band=band)
+        placed = _bases_lines(land, bases, base_cells) if bases is not None or base_cells is not None else []
+        click.echo("\n".join([describe_map(land), *placed]))
+
+
+def _bases_lines(land, bases: int | None, base_cells: str | None) -> list[str]:
+    """Where the groundstations of ``drones.bases`` / ``drones.base_cells`` go on ``land``, as :func:`maps_show`
+    prints them; a setting the drones would refuse is refused here the same way."""
+    from roshan.config.schema import from_dict
+    from roshan.config.sim import DroneConfig, parse_base_cells
+    from roshan.kernels.drones import corner_bases, farthest_cell
+    from roshan.maps import MIN_BASES_MAP_SIDE
+
+    count = bases or len(parse_base_cells(base_cells or "")) or 1
+    cfg = from_dict(DroneConfig, {"bases": count, "base_cells": base_cells or ""})
+    rows, cols, cell = land.rows, land.cols, land.cell_size
+    if cfg.explicit_bases:
+        outside = [c for c in cfg.explicit_bases if c[0] >= rows or c[1] >= cols]
+        if outside:
+            raise ValueError(f"--base-cells {base_cells!r}: cell(s) {outside} lie outside {land.name} "
+                             f"({rows} x {cols} cells: rows 0-{rows - 1}, columns 0-{cols - 1})")
+        placements = (cfg.explicit_bases,)
+        lines = [f"Bases:      {count} at the cells given (drones.base_cells), the drones starting at the first:",
+                 "  " + ", ".join(f"({r}, {c})" for r, c in cfg.explicit_bases)]
+    else:
+        if count > 1 and min(rows, cols) < MIN_BASES_MAP_SIDE:
+            raise ValueError(f"--bases {count} needs a map of at least {MIN_BASES_MAP_SIDE} x {MIN_BASES_MAP_SIDE} "
+                             f"cells; {land.name} has {rows} x {cols}")
+        placements = corner_bases(rows, cols, count)
+        lines = [f"Bases:      {count} one cell inside corners (drones.bases); the first in the episode's random "
+                 "corner, where the drones start:"]
+        lines += ["  " + ", ".join(f"({r}, {c})" for r, c in p) for p in placements]
+    far = farthest_cell(placements, rows, cols, cell)
+    lines.append(f"Farthest:   {far:.0f} m from a cell to its nearest base ({2 * far:.0f} m out and back)")
+    return lines
 
 
 @maps.command("crop")

@@ -151,6 +151,25 @@ class EnergyConfig(Section):
         return {k: preset[k] if getattr(self, k) is None else float(getattr(self, k)) for k in preset}
 
 
+def parse_base_cells(text: str) -> tuple[tuple[int, int], ...]:
+    """``drones.base_cells`` ("row,col; row,col") as cells, or a ConfigError naming the key and the bad part."""
+    cells = []
+    for part in text.replace(" ", "").strip(";").split(";"):
+        if not part:
+            continue
+        try:
+            row, col = (int(v) for v in part.split(","))
+        except ValueError:
+            raise ConfigError(f"DroneConfig: drones.base_cells = {text!r}: expected cells as 'row,col; row,col' "
+                              f"(whole numbers), got {part!r}") from None
+        if row < 0 or col < 0:
+            raise ConfigError(f"DroneConfig: drones.base_cells = {text!r}: cell {part!r} has a negative index")
+        cells.append((row, col))
+    if len(set(cells)) != len(cells):
+        raise ConfigError(f"DroneConfig: drones.base_cells = {text!r} names a cell twice")
+    return tuple(cells)
+
+
 @dataclass(frozen=True)
 class DroneConfig(Section):
     """FlyAgent drones (docs/model/agents.md §1, §3, §4, §14): physics, sensing, start layout and water."""
@@ -182,23 +201,7 @@ class DroneConfig(Section):
     @property
     def explicit_bases(self) -> tuple[tuple[int, int], ...]:
         """The cells (row, col) of ``base_cells``, the first the drones' start; () for the corner rule."""
-        text = self.base_cells.replace(" ", "")
-        if not text:
-            return ()
-        cells = []
-        for part in text.strip(";").split(";"):
-            try:
-                row, col = (int(v) for v in part.split(","))
-            except ValueError:
-                raise ConfigError(f"DroneConfig: drones.base_cells = {self.base_cells!r}: expected cells as "
-                                  f"'row,col; row,col' (whole numbers), got {part!r}") from None
-            if row < 0 or col < 0:
-                raise ConfigError(f"DroneConfig: drones.base_cells = {self.base_cells!r}: cell {part!r} has a "
-                                  "negative index")
-            cells.append((row, col))
-        if len(set(cells)) != len(cells):
-            raise ConfigError(f"DroneConfig: drones.base_cells = {self.base_cells!r} names a cell twice")
-        return tuple(cells)
+        return parse_base_cells(self.base_cells)
 
     # The keys that shape a network seeing the whole fleet in one row (the planner's): the number of drones, and
     # whether they carry a battery (a property of the section: with one the observation has an energy part whatever

@@ -25,6 +25,28 @@ BIN = 0.05  # action resolution with use_vel_bins: 41 levels in [-1, 1]
 BASE_CORNER_MASKS = (0, 3, 1, 2)
 
 
+def corner_bases(rows: int, cols: int, count: int) -> tuple[tuple[tuple[int, int], ...], ...]:
+    """The cells (row, col) of ``count`` bases by the corner rule, for each first corner 0-3 in turn (the kernels'
+    :meth:`DroneSim.place` draws which): where ``drones.bases`` puts them on a map of ``rows`` x ``cols`` cells."""
+    def corner(k: int) -> tuple[int, int]:  # as DroneSim.corner_cell
+        return (1 if k < 2 else rows - 2, 1 if k % 2 == 0 else cols - 2)
+
+    return tuple(tuple(corner(first ^ BASE_CORNER_MASKS[b]) for b in range(count)) for first in range(4))
+
+
+def farthest_cell(placements, rows: int, cols: int, cell: float) -> float:
+    """Metres from the farthest cell centre of a ``rows`` x ``cols`` map to its nearest base, the largest over
+    ``placements`` (P, B, 2) base cells: the farthest a fire can be from where a drone restocks."""
+    placed = np.unique(np.asarray(placements, np.int64).reshape(-1, np.shape(placements)[-2], 2), axis=0)
+    centres = (placed.astype(np.float64) + 0.5) * cell
+    rr, cc = np.meshgrid((np.arange(rows) + 0.5) * cell, (np.arange(cols) + 0.5) * cell, indexing="ij")
+    cells = np.stack([rr.ravel(), cc.ravel()], axis=-1)
+    far = 0.0
+    for bases in centres:  # one placement at a time: cells x B distances
+        far = max(far, float(np.linalg.norm(cells[:, None, :] - bases[None], axis=-1).min(axis=1).max()))
+    return far
+
+
 @ti.func
 def bin_action(a: ti.f32) -> ti.f32:
     """round(a / 0.05) * 0.05 with halves away from zero (C++ std::round)."""
@@ -134,18 +156,8 @@ class DroneSim:
         self._reset(mask)
 
     def farthest_from_bases(self) -> float:
-        """Metres from the farthest cell centre of the map to its nearest base, the largest over the envs: the
-        farthest a fire can be from where a drone restocks (read after a reset has placed the bases)."""
-        placed = np.unique(self.bases.to_numpy(), axis=0)  # the envs' distinct placements (a corner each)
-        bases = (placed.astype(np.float64) + 0.5) * self.cell  # (P, B, 2) base centres
-        rows, cols = np.meshgrid((np.arange(self.rows) + 0.5) * self.cell, (np.arange(self.cols) + 0.5) * self.cell,
-                                 indexing="ij")
-        cells = np.stack([rows.ravel(), cols.ravel()], axis=-1)  # (C, 2)
-        far = 0.0
-        for env_bases in bases:  # one placement at a time: C x B distances
-            gaps = np.linalg.norm(cells[:, None, :] - env_bases[None, :, :], axis=-1)
-            far = max(far, float(gaps.min(axis=1).max()))
-        return far
+        """:func:`farthest_cell` for the bases the envs have now (read after a reset has placed them)."""
+        return farthest_cell(self.bases.to_numpy(), self.rows, self.cols, self.cell)
 
     def move(self, actions) -> None:
         """Apply (E, N, 2) float32 actions to every drone and refresh neighbours and collisions."""

@@ -172,3 +172,26 @@ def test_base_cells_outside_the_map_are_refused_with_its_size():
     with pytest.raises(ValueError, match=r"drones.base_cells = '1,1; 35,2': cell\(s\) \[\(35, 2\)\] lie outside "
                                          r"the map of 35 x 36 cells \(rows 0-34, columns 0-35\)"):
         make(bases=2, base_cells="1,1; 35,2")
+
+
+def test_maps_show_prints_where_the_bases_go_as_the_kernels_put_them():
+    """`roshan maps show MAP --bases N` lists the corner rule's placements for each first corner: the kernels'
+    placements over many envs are exactly those rows, and the farthest distance is the kernels' figure."""
+    from click.testing import CliRunner
+
+    from roshan.cli import main
+    from roshan.kernels.drones import corner_bases
+
+    d = make(bases=3, envs=32, seed=4)
+    placed = {tuple(map(tuple, env)) for env in d.bases.to_numpy()}
+    assert placed == set(corner_bases(35, 36, 3))  # 32 envs draw each of the four first corners
+    out = CliRunner().invoke(main, ["maps", "show", "35x36_Woods", "--bases", "3"])
+    assert out.exit_code == 0, out.output
+    for placement in corner_bases(35, 36, 3):
+        assert "  " + ", ".join(f"({r}, {c})" for r, c in placement) + "\n" in out.output
+    assert f"Farthest:   {d.farthest_from_bases():.0f} m from a cell to its nearest base" in out.output
+    given = CliRunner().invoke(main, ["maps", "show", "35x36_Woods", "--base-cells", "10,20; 30,5"])
+    assert given.exit_code == 0 and "  (10, 20), (30, 5)\n" in given.output
+    outside = CliRunner().invoke(main, ["maps", "show", "35x36_Woods", "--base-cells", "10,20; 40,5"])
+    assert outside.exit_code == 1 and "cell(s) [(40, 5)] lie outside 35x36_Woods (35 x 36 cells" in outside.output
+    assert "Map:" not in outside.output  # refused before anything is printed
