@@ -17,10 +17,11 @@ def fly_ppo(cfg: PPOConfig, collision: bool, frames: int = 3, device: str | torc
 
 
 def planner_ppo(cfg: PPOConfig, planner: PlannerConfig, num_drones: int, device: str | torch.device = "cpu",
-                rnd: RNDConfig | None = None, resources: bool = False) -> PPO:
+                rnd: RNDConfig | None = None, resources: bool = False, bases: int = 1) -> PPO:
     """PPO over the planner network ``planner`` (the section) describes for ``num_drones`` drones; ``resources``:
-    their observation has its resource parts (both from :meth:`roshan.config.sim.DroneConfig.fleet_shape`)."""
-    return PPO(cfg, PlannerPolicy(planner, num_drones, resources), device, rnd)
+    their observation has its resource parts (both from :meth:`roshan.config.sim.DroneConfig.fleet_shape`);
+    ``bases``: its candidate list starts with that many bases."""
+    return PPO(cfg, PlannerPolicy(planner, num_drones, resources, bases), device, rnd)
 
 
 def make_agent(cfg: Config, device: str | torch.device = "cpu", seed: int | None = None) -> Agent:
@@ -37,7 +38,7 @@ def make_agent(cfg: Config, device: str | torch.device = "cpu", seed: int | None
 AGENTS = {
     "ppo": lambda cfg, device: fly_ppo(cfg.ppo, cfg.fly.collision, cfg.fly.frames, device, cfg.rnd),
     "planner": lambda cfg, device: planner_ppo(cfg.ppo, cfg.planner, device=device, rnd=cfg.rnd,
-                                               **cfg.drones.fleet_shape()),
+                                               bases=cfg.drones.bases, **cfg.drones.fleet_shape()),
     "td3": lambda cfg, device: TD3(cfg.td3, cfg.fly.collision, cfg.fly.frames, device),
     "iql": lambda cfg, device: IQL(cfg.iql, cfg.fly.collision, cfg.fly.frames, device),
 }

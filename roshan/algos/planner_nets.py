@@ -51,10 +51,10 @@ def fleet_features_dim(num_drones: int, resources: bool) -> int:
     return (7 if resources else 5) * num_drones + 5
 
 
-def candidate_validity(fires_mask: torch.Tensor) -> torch.Tensor:
-    """(B, K) bool, True = selectable; the groundstation (index 0) is always valid."""
+def candidate_validity(fires_mask: torch.Tensor, bases: int = 1) -> torch.Tensor:
+    """(B, K) bool, True = selectable; the bases (the first ``bases`` candidates, 0 the groundstation) always are."""
     valid = fires_mask > 0
-    valid[:, 0] = True
+    valid[:, :bases] = True
     return valid
 
 
@@ -126,12 +126,12 @@ def without_taken(row: torch.Tensor, taken: torch.Tensor) -> torch.Tensor:
     return torch.where(torch.isfinite(masked).any(-1, keepdim=True), masked, row)
 
 
-def distinct_rows(logits: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+def distinct_rows(logits: torch.Tensor, actions: torch.Tensor, bases: int = 1) -> torch.Tensor:
     """Teacher-forced (B, N, K) logits of drones choosing in id order: drone i's row without the fires drones
-    0..i-1 took in ``actions`` (the groundstation, index 0, may repeat)."""
+    0..i-1 took in ``actions`` (the bases, the first ``bases`` candidates, may repeat)."""
     onehot = F.one_hot(actions, logits.shape[-1])
     taken = (onehot.cumsum(1) - onehot) > 0
-    taken[..., 0] = False
+    taken[..., :bases] = False
     return without_taken(logits, taken)
 
 
@@ -160,7 +160,7 @@ class ThesisPlannerNet(nn.Module):
 
     def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS,
                  temperature: float = 1.0, resources: bool = False, distance_prior: float = 0.0,
-                 distinct_goals: bool = False):
+                 distinct_goals: bool = False, bases: int = 1):
         super().__init__()
         self.pos_emb = Linear(2, hidden)
         self.goal_emb = Linear(2, hidden)
@@ -177,18 +177,20 @@ class ThesisPlannerNet(nn.Module):
         self.temperature = temperature  # planner.temperature: logits / T, so p ~ weights^(1/T)
         self.prior = make_distance_prior(distance_prior)
         self.distinct_goals = distinct_goals  # planner.distinct_goals: drones choose in id order, a fire once
+        self.bases = bases  # drones.bases: the first candidates are the bases (a setting of the env, not a weight)
 
     def allowed(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
-        """(B, 1, K) bool, the same for every drone: valid fires, or only the groundstation when no fire is valid;
-        with resources (B, N, K): the groundstation also for each drone whose battery or tank is below half."""
+        """(B, 1, K) bool, the same for every drone: valid fires, or only the bases when no fire is valid; with
+        resources (B, N, K): the bases also for each drone whose battery or tank is below half."""
+        b = self.bases
         allowed = obs["fires_mask"] > 0
-        no_fire = ~allowed[:, 1:].any(-1)
-        allowed[:, 0] = no_fire
+        no_fire = ~allowed[:, b:].any(-1)
+        allowed[:, :b] = no_fire[:, None]
         allowed = allowed.unsqueeze(1)
         if self.resources:
             restock = (obs["energy"][..., 0] < RESTOCK_BELOW) | (obs["water"][..., 0] < RESTOCK_BELOW)  # (B, N)
             allowed = allowed.repeat(1, restock.shape[1], 1)
-            allowed[..., 0] = restock | no_fire[:, None]
+            allowed[..., :b] = (restock | no_fire[:, None]).unsqueeze(-1)
         return allowed
 
     def queries(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
@@ -255,15 +257,15 @@ class ThesisPlannerNet(nn.Module):
         with torch.no_grad():
             for i in range(N):
                 actions[:, i] = sample_rows(without_taken(logits[:, i], taken), deterministic, generator)
-                taken.scatter_(1, actions[:, i:i + 1], (actions[:, i:i + 1] > 0))
+                taken.scatter_(1, actions[:, i:i + 1], (actions[:, i:i + 1] >= self.bases))
         # scored with the teacher-forced rows evaluate() builds, so both agree exactly
-        return (actions, *score(distinct_rows(logits, actions), actions), value)
+        return (actions, *score(distinct_rows(logits, actions, self.bases), actions), value)
 
     def evaluate(self, obs: dict[str, torch.Tensor], actions: torch.Tensor):
         """Joint log-prob (B,), entropy (B,) and value (B,) of given actions (B, N)."""
         logits, value = self.heads(obs)
         if self.distinct_goals:
-            logits = distinct_rows(logits, actions)
+            logits = distinct_rows(logits, actions, self.bases)
         return (*score(logits, actions), value)
 
     def value(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
@@ -308,10 +310,12 @@ class PlannerEncoder(nn.Module):
         # one before)
         self.energy_emb = embed(2) if resources else None
 
-    def forward(self, obs: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Drone representations (B, N, H), fire embeddings (B, K, H) and candidate validity (B, K)."""
+    def forward(self, obs: dict[str, torch.Tensor], bases: int = 1) -> tuple[torch.Tensor, torch.Tensor,
+                                                                             torch.Tensor]:
+        """Drone representations (B, N, H), fire embeddings (B, K, H) and candidate validity (B, K) (the first
+        ``bases`` candidates are the bases)."""
         pos, g = obs["drones"], obs["globals"]
-        valid = candidate_validity(obs["fires_mask"])
+        valid = candidate_validity(obs["fires_mask"], bases)
         # velocity = pos_t - pos_{t-1}: always 0, the planner keeps one frame (docs/model/learning.md §3.2)
         ids = [] if self.id_emb is None else [self.id_emb(self.drone_ids).expand(pos.shape[0], -1, -1)]
         tokens = torch.cat([self.pos_emb(pos), self.goal_emb(obs["goals"]), *ids,
@@ -328,14 +332,15 @@ class PlannerEncoder(nn.Module):
 
 class PointerPlannerNet(nn.Module):
     """Newest planner (docs/model/learning.md §3.2): the encoder above, a pointer actor decoded autoregressively over
-    drones (each fire at most once per decision, the groundstation any number of times, a learnable soft penalty on
+    drones (each fire at most once per decision, the bases any number of times, a learnable soft penalty on
     repeats) and an attention-pooled critic on the shared encoder."""
 
     knows_ids = True  # each drone's id is embedded: the net flies the fleet size it was built for
 
     def __init__(self, num_drones: int, hidden: int = HIDDEN, heads: int = HEADS,
-                 temperature: float = 1.0, resources: bool = False, distance_prior: float = 0.0):
+                 temperature: float = 1.0, resources: bool = False, distance_prior: float = 0.0, bases: int = 1):
         super().__init__()
+        self.bases = bases  # drones.bases: the first candidates are the bases (a setting of the env, not a weight)
         self.encoder = PlannerEncoder(num_drones, hidden, heads, resources, ids=self.knows_ids)
         self.query_proj = Linear(hidden, hidden)
         self.key_proj = Linear(hidden, hidden)
@@ -359,11 +364,10 @@ class PointerPlannerNet(nn.Module):
     def penalty(self) -> torch.Tensor:
         return self.log_penalty.clamp(-3.0, 3.0).exp()
 
-    @staticmethod
-    def blocked(invalid: torch.Tensor, used: torch.Tensor) -> torch.Tensor:
-        """Invalid or already taken candidates; a row with nothing left falls back to the groundstation."""
+    def blocked(self, invalid: torch.Tensor, used: torch.Tensor) -> torch.Tensor:
+        """Invalid or already taken candidates; a row with nothing left falls back to the bases."""
         blocked = invalid | used
-        blocked[..., 0] &= ~blocked.all(-1)
+        blocked[..., :self.bases] &= ~blocked.all(-1, keepdim=True)
         return blocked
 
     def decode_logits(self, base: torch.Tensor, valid: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
@@ -371,7 +375,7 @@ class PointerPlannerNet(nn.Module):
         onehot = F.one_hot(actions, base.shape[-1]).to(base.dtype)
         counts = onehot.cumsum(1) - onehot  # how many earlier drones chose j
         used = counts > 0
-        used[..., 0] = False  # the groundstation may repeat
+        used[..., :self.bases] = False  # the bases may repeat
         blocked = self.blocked(~valid.unsqueeze(1), used)
         return (base - self.penalty() * counts).masked_fill(blocked, float("-inf"))
 
@@ -382,7 +386,7 @@ class PointerPlannerNet(nn.Module):
     def forward_act(self, obs: dict[str, torch.Tensor], deterministic: bool = False,
                     generator: torch.Generator | None = None):
         """Actions (B, N), joint log-prob (B,), entropy (B,) and value (B,), decoding drones in id order."""
-        d, fires, valid = self.encoder(obs)
+        d, fires, valid = self.encoder(obs, self.bases)
         base = self.base_logits(d, fires, obs)
         B, N, K = base.shape
         c = self.penalty()
@@ -395,19 +399,19 @@ class PointerPlannerNet(nn.Module):
                 a = sample_rows(row, deterministic, generator)
                 actions[:, i] = a
                 counts.scatter_add_(1, a.unsqueeze(1), torch.ones_like(counts[:, :1]))
-                used.scatter_(1, a.unsqueeze(1), (a != 0).unsqueeze(1))
+                used.scatter_(1, a.unsqueeze(1), (a >= self.bases).unsqueeze(1))
         # score the chosen actions with the same teacher-forced computation as evaluate(), so both agree exactly
         log_prob, entropy = score(self.decode_logits(base, valid, actions), actions)
         return actions, log_prob, entropy, self.critic(d)
 
     def evaluate(self, obs: dict[str, torch.Tensor], actions: torch.Tensor):
         """Joint log-prob (B,), entropy (B,) and value (B,) of given actions (B, N), teacher-forced."""
-        d, fires, valid = self.encoder(obs)
+        d, fires, valid = self.encoder(obs, self.bases)
         logits = self.decode_logits(self.base_logits(d, fires, obs), valid, actions)
         return (*score(logits, actions), self.critic(d))
 
     def value(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
-        return self.critic(self.encoder(obs)[0])
+        return self.critic(self.encoder(obs, self.bases)[0])
 
     def critic_parameters(self) -> list[nn.Parameter]:
         """Pooling query, pooling attention and value MLP: the encoder is shared with the actor."""

@@ -169,13 +169,14 @@ class PlannerPolicy:
     # both planner critics read the actor's encoder (thesis Table 5.8, docs/model/learning.md §3.2)
     shares_encoder = True
 
-    def __init__(self, planner: PlannerConfig, num_drones: int, resources: bool = False):
+    def __init__(self, planner: PlannerConfig, num_drones: int, resources: bool = False, bases: int = 1):
         """``planner``: the section (network, temperature, distance_prior, distinct_goals); ``resources``: the
-        drones' observation has its resource parts, which the network reads (:mod:`roshan.algos.planner_nets`)."""
+        drones' observation has its resource parts, which the network reads (:mod:`roshan.algos.planner_nets`);
+        ``bases``: the candidate list starts with that many bases (``drones.bases``)."""
         # the pointer nets always decode distinct goals; the thesis net on request (planner.distinct_goals)
         distinct = {"distinct_goals": planner.distinct_goals} if planner.network == "thesis" else {}
         self.net = PLANNER_NETS[planner.network](num_drones, temperature=planner.temperature, resources=resources,
-                                                 distance_prior=planner.distance_prior, **distinct)
+                                                 distance_prior=planner.distance_prior, bases=bases, **distinct)
         self.novelty_dim = fleet_features_dim(num_drones, resources)
 
     novelty_features = staticmethod(fleet_features)

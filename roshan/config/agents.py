@@ -131,7 +131,7 @@ class PlannerConfig(Section):
                                    "(landed drones swap side by side)")
     planner_resources: bool = False  # with a battery: planner drones go home on the aware greedy's rule by themselves
     max_candidates: int = num(0, 0, 1 << 24,
-                              doc="candidate list length K (groundstation included); 0 = every cell + 1")
+                              doc="candidate list length K (the bases included, first); 0 = every cell + drones.bases")
     temperature: float = num(1.0, 0.0, 10.0, lo_open=True,
                              doc="the planner's categorical is p^(1/T), renormalised (logits / T): T < 1 sharpens "
                                  "the sampled goals so training episodes can end in success; argmax is unchanged")
@@ -173,7 +173,11 @@ class PlannerConfig(Section):
         if self.planner_resources and not drones.energy.enabled:
             out.append("planner.planner_resources = true does nothing while drones.energy.preset is off: the return "
                        "rule watches the drones' batteries")
-        if self.max_candidates == 1:
+        if self.max_candidates == 1 == drones.bases:
             out.append("planner.max_candidates = 1 lists the groundstation alone (candidate 0): the planner can choose "
                        "no fire; 0 lists every cell")
+        elif self.max_candidates == drones.bases:
+            b = drones.bases
+            out.append(f"planner.max_candidates = {b} lists the bases alone (candidates 0-{b - 1}, drones.bases): "
+                       "the planner can choose no fire; 0 lists every cell")
         return out

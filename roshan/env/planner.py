@@ -19,7 +19,7 @@ from roshan.env.base import VectorEnvCore
 from roshan.env.fly import fly_obs_views
 from roshan.kernels import observe
 from roshan.kernels.launch import PreparedLaunch
-from roshan.kernels.planner import obs_layout, obs_parts
+from roshan.kernels.planner import candidate_count, obs_layout, obs_parts
 from roshan.kernels.pool import take_planner_sims
 from roshan.maps import check_explorer_map
 from roshan.runtime import ensure_taichi, torch_device
@@ -113,7 +113,7 @@ class PlannerVectorEnv(VectorEnvCore):
 
     def _buffer_bytes(self) -> int:
         n, pc = self.num_drones, self.planner_config
-        m, k = pc.num_explorers, pc.max_candidates or self.land.rows * self.land.cols + 1
+        m, k = pc.num_explorers, candidate_count(pc, self.config.drones, self.land.rows * self.land.cols)
         ex_frames = self.explorer_policy.frames if self.explorer_policy else 1
         width = max(end for _, end in obs_layout(self.config.drones, k).values())
         stacks = n * self.fly_policy.frames * observe.frame_width(n) + m * ex_frames * observe.frame_width(m)

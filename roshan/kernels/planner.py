@@ -53,6 +53,16 @@ def planner_time_limit(rows: int, cols: int, cell: float, dt: float, v_max: floa
     return max(math.ceil((length / v_max + fires * dt) / dt), math.ceil(2 * t_phys))
 
 
+def candidate_count(pc: PlannerConfig, drones: DroneConfig, num_cells: int) -> int:
+    """K, the length of the candidate list: ``planner.max_candidates``, or with 0 every cell after the bases
+    (``drones.bases`` of them, the list's first entries). A list too short to hold every base is refused."""
+    if pc.max_candidates and pc.max_candidates < drones.bases:
+        raise ValueError(f"planner.max_candidates = {pc.max_candidates} is fewer than the bases (drones.bases = "
+                         f"{drones.bases}), which the candidate list starts with: set at least {drones.bases}, "
+                         "or 0 for every cell")
+    return pc.max_candidates or num_cells + drones.bases
+
+
 # Every part of the planner observation in the order of the flat row: name -> (shape per row with n drones and k
 # candidates, low, high). Positions leave [-1, 1] when a drone leaves the map; the globals' fire count is -2 .. 1.
 def obs_parts(drones: DroneConfig, max_candidates: int) -> dict[str, tuple[tuple[int, ...], float, float]]:
@@ -82,7 +92,7 @@ class PlannerKernels(EpisodeKernels):
         fire, drones, explorers: the simulator and the two drone groups (same envs).
         maps: the fire map and meander waypoints (its drone group is ``explorers``).
         pc: the planner section (``interval``: low-level steps per planner step; ``rewards``; ``burnout``;
-            ``max_candidates``: length K of the candidate list, groundstation included, 0 for every cell + 1;
+            ``max_candidates``: length K of the candidate list, bases included (:func:`candidate_count`);
             ``train_fires`` / ``eval_fires``; ``greedy_home``; the return rule of each controller,
             ``greedy_resources`` / ``planner_resources`` with ``greedy_energy_margin`` and ``return_queue``).
         controller: ``planner`` (the drones fly the planner's goals) or ``greedy`` (the heuristic state machine of
@@ -103,7 +113,8 @@ class PlannerKernels(EpisodeKernels):
         # the candidates: the fire map's cells (fires some drone has seen) or all burning cells (centralised training)
         self.detected = (pc.eval_fires if evaluation else pc.train_fires) == "detected" or self.greedy
         self.burnout = pc.burnout  # burned-out fraction of the map that fails the episode
-        self.K = max_candidates = pc.max_candidates or fire.num_cells + 1
+        self.K = max_candidates = candidate_count(pc, drones.cfg, fire.num_cells)
+        self.bases = drones.num_bases  # candidates 0 .. bases - 1 are the bases, the fires follow
         self.fly_frames, self.explore_frames = fly_frames, explore_frames
         self.use_water, self.use_energy = drones.use_water, drones.use_energy
         self.layout = obs_layout(drones.cfg, max_candidates)
@@ -136,8 +147,8 @@ class PlannerKernels(EpisodeKernels):
         self.decisions = ti.field(ti.i32, E)  # planner steps in this episode
         self.prev_water = ti.field(ti.f32, (E, N))
         self.prev_lost = ti.field(ti.i32, E)  # drones down at the previous decision (DroneLost pays the new ones)
-        self.cand_cell = ti.field(ti.i32, (E, max_candidates))  # flat cell of candidate k (k >= 1)
-        self.cand_count = ti.field(ti.i32, E)  # valid candidates, groundstation included
+        self.cand_cell = ti.field(ti.i32, (E, max_candidates))  # flat cell of candidate k (k >= bases)
+        self.cand_count = ti.field(ti.i32, E)  # valid candidates, bases included
 
     @staticmethod
     def field_bytes(num_envs: int, num_drones: int, max_candidates: int) -> int:
@@ -286,22 +297,25 @@ class PlannerKernels(EpisodeKernels):
 
     @ti.func
     def assign_goals(self, actions: ti.template(), e):
-        """docs/model/agents.md §13.4: candidate 0 (and any index past the valid list) is the groundstation: the
-        drone's nearest base (with ``drones.bases`` > 1; the observation lists the first base's centre there)."""
+        """docs/model/agents.md §13.4: candidate b < ``drones.bases`` is base b (candidate 0 the groundstation), any
+        index past the valid list the drone's nearest base, and the others the listed fires."""
         dr = self.drones
         for d in range(dr.num_drones):
             k = ti.cast(actions[e, d], ti.i32)
             if self.returns.keeps_goal(e, d) != 0:
                 continue  # on its way home or waiting there: its goal stays until it is stocked
-            if k < 1 or k >= self.cand_count[e]:
+            if k < self.bases or k >= self.cand_count[e]:
                 self.returns.send_home(e, d)  # short of a full battery or tank, it stays there until stocked
-            if k >= 1 and k < self.cand_count[e]:
+            if k >= self.bases and k < self.cand_count[e]:
                 c = self.cand_cell[e, k]
                 dr.goal_cell[e, d] = c
                 dr.goal[e, d] = dr.cell_centre(c)
             else:
                 dr.goal_cell[e, d] = GROUND_GOAL
                 dr.goal[e, d] = dr.head_home(e, d)  # its nearest base
+                if k >= 0 and k < self.bases:  # a base the planner named: that one becomes its home
+                    dr.home[e, d] = k
+                    dr.goal[e, d] = dr.home_centre(e, d)
             dr.prev_dist[e, d] = dr.distance_to_goal(e, d)
         # FlyingTowardsGroundStation and SameGoalPenalty judge this decision.
         to_ground = 0.0
@@ -391,11 +405,12 @@ class PlannerKernels(EpisodeKernels):
             dr.battery.observe(obs, e, d, self.o_energy + 2 * d)  # the observation's energy part (with a battery)
         f0 = self.o_fires
         m0 = self.o_mask
-        gs = dr.base_centre(e, 0)
-        obs[e, f0] = gs[0] * self.norm - 1.0
-        obs[e, f0 + 1] = gs[1] * self.norm - 1.0
-        obs[e, m0] = 1.0
-        k = 1
+        for b in ti.static(range(self.bases)):  # the bases first, in order (candidate 0: the groundstation)
+            gs = dr.base_centre(e, b)
+            obs[e, f0 + 2 * b] = gs[0] * self.norm - 1.0
+            obs[e, f0 + 2 * b + 1] = gs[1] * self.norm - 1.0
+            obs[e, m0 + b] = 1.0
+        k = self.bases
         cols = self.fire.cols
         centroid = ti.Vector([0.0, 0.0])
         for c in range(self.fire.num_cells):
@@ -417,7 +432,7 @@ class PlannerKernels(EpisodeKernels):
             obs[e, f0 + 2 * j] = 0.0
             obs[e, f0 + 2 * j + 1] = 0.0
             obs[e, m0 + j] = 0.0
-        n_fires = k - 1
+        n_fires = k - self.bases
         g0 = self.o_globals
         obs[e, g0] = ti.math.clamp(ti.log(1.0 + n_fires) / self.log_cells, 0.0, 1.0)
         if n_fires > 0:

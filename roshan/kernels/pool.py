@@ -29,7 +29,7 @@ from roshan.kernels.explore import ExploreMaps, meander_length
 from roshan.kernels.fire import FireSim
 from roshan.kernels.fire_layout import FireSizes, choose_parallel, fire_sizes
 from roshan.kernels.fly import FlyKernels, time_limit
-from roshan.kernels.planner import PlannerKernels, planner_time_limit
+from roshan.kernels.planner import PlannerKernels, candidate_count, planner_time_limit
 from roshan.kernels.render import EnvZeroFrames
 from roshan.maps import LandCoverMap
 from roshan.memory import check_fits, format_bytes
@@ -91,7 +91,7 @@ def fly_estimate(land: LandCoverMap, cfg: Config, num_envs: int) -> Estimate:
 def planner_estimate(land: LandCoverMap, cfg: Config, pc: PlannerConfig, num_envs: int) -> Estimate:
     """What :func:`take_planner_sims` would allocate for ``num_envs`` envs (the renderer aside)."""
     fire_bytes, z = fire_estimate(land, cfg, num_envs)
-    k = pc.max_candidates or land.rows * land.cols + 1
+    k = candidate_count(pc, cfg.drones, land.rows * land.cols)
     max_len = meander_length(land.rows, land.cols, pc.num_explorers, pc.explorer_view_range, pc.meander)
     total = (fire_bytes + DroneSim.field_bytes(num_envs, cfg.drones)
              + DroneSim.field_bytes(num_envs, pc.explorer_drones(cfg.drones))

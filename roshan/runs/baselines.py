@@ -58,15 +58,16 @@ def fly_baseline(cfg: Config, env, name: str, num_envs: int, seed: int, make_env
     return env, baseline_fn(name, num_envs, env.num_drones, seed)
 
 
-def clairvoyant_fn(margin: float):
+def clairvoyant_fn(margin: float, bases: int = 1):
     """The clairvoyant reference's goals on planner observations whose candidates are every burning cell (no
     exploration: ``planner.eval_fires: true``). Each decision it solves the assignment of drones to fires that
     minimises their summed flight times (scipy's ``linear_sum_assignment``: each fire to at most one drone; a drone
     left over when fewer fires burn than drones fly takes its nearest fire). A drone flies the quickest path at
     ``v_max`` per axis, so its time to a fire is the larger of the two axis distances (Chebyshev). A drone goes to
-    the groundstation (candidate 0) instead when its tank is empty or, with a battery, when its charge is at most
-    (1 + ``margin``) times what the flight home takes, and stays there until both are full, as the resource-aware
-    greedy does. It looks at every env on the host each decision: an evaluation reference, not a trained controller.
+    its nearest base (of the first ``bases`` candidates; candidate 0, the groundstation, with one) instead when its
+    tank is empty or, with a battery, when its charge is at most (1 + ``margin``) times what the flight home takes,
+    and stays there until both are full, as the resource-aware greedy does. It looks at every env on the host each
+    decision: an evaluation reference, not a trained controller.
     """
 
     def act(obs: dict[str, torch.Tensor]) -> torch.Tensor:
@@ -80,18 +81,21 @@ def clairvoyant_fn(margin: float):
             home |= at_base & (charge < 1.0)  # landed: wait for the full battery
         goals = np.zeros(drones.shape[:2], dtype=np.int64)
         for b in range(drones.shape[0]):
-            goals[b] = _assign(drones[b], fires[b], valid[b], home[b])
+            goals[b] = _assign(drones[b], fires[b], valid[b], home[b], bases)
         return torch.from_numpy(goals)
 
     return act
 
 
-def _assign(drones: np.ndarray, fires: np.ndarray, valid: np.ndarray, home: np.ndarray) -> np.ndarray:
-    """One env's goals (N,): candidate 0 for drones sent home, else the min-sum assignment of flight times."""
+def _assign(drones: np.ndarray, fires: np.ndarray, valid: np.ndarray, home: np.ndarray,
+            bases: int = 1) -> np.ndarray:
+    """One env's goals (N,): the nearest base for drones sent home (Euclidean, ties to the lower index, as the
+    kernels' nearest base), else the min-sum assignment of flight times."""
     from scipy.optimize import linear_sum_assignment  # only this reference needs scipy (0.3 s to import)
 
-    goals = np.zeros(len(drones), dtype=np.int64)
-    burning = np.flatnonzero(valid[1:]) + 1  # candidate 0 is the groundstation
+    gaps = np.linalg.norm(drones[:, None, :] - fires[None, :bases, :], axis=-1)  # (N, bases)
+    goals = gaps.argmin(-1).astype(np.int64)  # with one base: candidate 0, the groundstation
+    burning = np.flatnonzero(valid[bases:]) + bases  # the candidates after the bases
     flying = np.flatnonzero(~home)
     if not len(burning) or not len(flying):
         return goals
@@ -113,7 +117,8 @@ def planner_baseline(cfg: Config, env, name: str, num_envs: int, seed: int, make
             (lambda obs: torch.zeros(num_envs, env.num_drones))
     if name == "clairvoyant":
         seeing = apply_overrides(cfg, ["planner.eval_fires='true'"], where="the clairvoyant reference")
-        return make_env(seeing, num_envs, seed, evaluation=True), clairvoyant_fn(cfg.planner.greedy_energy_margin)
+        return make_env(seeing, num_envs, seed, evaluation=True), clairvoyant_fn(cfg.planner.greedy_energy_margin,
+                                                                                 cfg.drones.bases)
     return env, planner_random_fn(seed)
 
 

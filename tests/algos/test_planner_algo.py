@@ -456,3 +456,45 @@ def test_the_fleet_size_is_a_model_key_except_for_the_fleet_net():
         sixteen = load_config(None, ["train.algo=planner", f"planner.network={network}", "drones.num_drones=16"])
         diffs = config_differences(sixteen, four, model_keys(four))
         assert bool(diffs) is refused, (network, diffs)
+
+
+def test_with_two_bases_the_thesis_net_offers_both_only_when_no_fire_is_listed():
+    """``bases`` = 2: candidates 0 and 1 are the bases. Both are masked while a fire is listed, both offered when
+    none is, and with distinct goals either may be taken by several drones."""
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(0)
+    N, K = 3, 7
+    net = ThesisPlannerNet(N, bases=2, distinct_goals=True)
+    n_valid = torch.tensor([2, 3, 5, 7, 2, 4])
+    obs = random_obs(6, N, K, g, n_valid)
+    probs = net.probs(obs)
+    allowed = torch.arange(K) < n_valid.unsqueeze(1)
+    allowed[:, :2] = (n_valid == 2).unsqueeze(1)  # the bases only when no fire is listed
+    assert bool((probs[~allowed.unsqueeze(1).expand_as(probs)] == 0).all())
+    for _ in range(30):
+        actions, logp, _, _ = net.forward_act(obs, generator=g)
+        assert bool(allowed.gather(1, actions).all()) and bool(torch.isfinite(logp).all())
+    logp_again = net.evaluate(obs, actions)[0]
+    torch.testing.assert_close(logp_again, logp)
+
+
+@torch.no_grad()
+@pytest.mark.parametrize("net_cls", [PointerPlannerNet, FleetPlannerNet])
+def test_with_two_bases_the_pointer_nets_let_either_base_repeat_and_take_each_fire_once(net_cls):
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(3)
+    net = net_cls(3, bases=2)
+    obs = random_obs(256, 3, 6, g, n_valid=torch.full((256,), 6))  # 4 fires for 3 drones
+    d, fires, valid = net.encoder(obs, net.bases)
+    base = net.base_logits(d, fires, obs)
+    both = torch.ones(256, 3, dtype=torch.long)  # every drone to base 1
+    logits = net.decode_logits(base, valid, both)
+    torch.testing.assert_close(logits[..., 1], base[..., 1] - net.penalty() * torch.arange(3.0))  # no mask
+    torch.testing.assert_close(logits[..., 0], base[..., 0])
+    net.log_penalty.fill_(-3.0)
+    for _ in range(5):
+        actions = net.forward_act(obs, generator=g)[0]
+        for row in actions:
+            fires_taken = row[row >= 2].tolist()
+            assert len(fires_taken) == len(set(fires_taken))  # each fire once per decision
+    assert bool(((actions == 1).sum(-1) >= 2).any() or ((actions == 0).sum(-1) >= 2).any())  # a base repeats

@@ -75,3 +75,13 @@ def test_the_planner_is_evaluated_beside_the_clairvoyant_reference(tmp_path):
     assert set(payload) >= {"policy", "clairvoyant"}
     assert 0.0 <= payload["clairvoyant"]["success_rate"] <= 1.0
     assert "clairvoyant reference" in res.output
+
+
+def test_with_two_bases_a_drone_sent_home_takes_its_nearest_base():
+    """Candidates 0 and 1 are bases at (-1, -1) and (1, 1): the drone with an empty tank near (1, 1) goes to base 1,
+    the one near (-1, -1) to base 0, and the fires after the bases are assigned among the others."""
+    drones = np.array([(0.8, 0.9), (-0.7, -0.9), (0.0, 0.0)], dtype=np.float32)
+    fires = np.array([(-1.0, -1.0), (1.0, 1.0), (0.1, 0.0), (0.5, -0.5)], dtype=np.float32)
+    home = np.array([True, True, False])
+    assert _assign(drones, fires, np.ones(4, bool), home, bases=2).tolist() == [1, 0, 2]
+    assert _assign(drones, fires, np.ones(4, bool), home).tolist()[:2] == [0, 0]  # one base: the groundstation
