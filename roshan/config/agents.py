@@ -143,6 +143,7 @@ class PlannerConfig(Section):
                           doc="the planner network: docs/model/learning.md §3.1 (thesis), §3.2 (pointer, newest), or "
                               "fleet: the pointer net without drone ids, whose weights fly any number of drones")
     fleet_sizes: str = ""  # e.g. "4,8,16": training takes these fleets in turn, an update each (fleet network only)
+    base_counts: str = ""  # e.g. "1,2": training also takes these drones.bases in turn, with each fleet
     rewards: PlannerRewardConfig = field(default_factory=PlannerRewardConfig)
 
     def __post_init__(self):
@@ -151,10 +152,19 @@ class PlannerConfig(Section):
         if not all(s.isdigit() and int(s) >= 1 for s in sizes):
             raise ConfigError(f"PlannerConfig: planner.fleet_sizes = {self.fleet_sizes!r}: expected positive drone "
                               "counts separated by commas, such as '4,8,16' (or '' to train one fleet)")
+        counts = self.base_counts.replace(" ", "").split(",") if self.base_counts.strip() else []
+        if not all(c.isdigit() and 1 <= int(c) <= 4 for c in counts):
+            raise ConfigError(f"PlannerConfig: planner.base_counts = {self.base_counts!r}: expected base counts from 1 "
+                              "to 4 (drones.bases) separated by commas, such as '1,2' (or '' for drones.bases)")
         if sizes and self.network not in ANY_FLEET_NETWORKS:
             raise ConfigError(f"PlannerConfig: planner.fleet_sizes = {self.fleet_sizes!r} needs a network that flies "
                               f"any fleet (planner.network: {' or '.join(ANY_FLEET_NETWORKS)}); the {self.network} "
                               "net embeds drone ids and flies one fleet size")
+
+    @property
+    def bases_in_turn(self) -> tuple[int, ...]:
+        """The base counts training takes in turn (``base_counts``); () for ``drones.bases`` alone."""
+        return tuple(int(c) for c in self.base_counts.replace(" ", "").split(",")) if self.base_counts.strip() else ()
 
     @property
     def fleets(self) -> tuple[int, ...]:

@@ -148,16 +148,20 @@ def check_learnable(cfg: Config) -> None:
     if LEARNERS[cfg.train.algo] is PPOLearner:
         for each in fleets:
             rollout_steps(each, kit_of(each).rows(each))  # a rollout must split over the rows of all envs
-    if len(fleets) > 1 and cfg.rnd.enabled:
+    if len(cfg.planner.fleets) > 1 and cfg.rnd.enabled:
         raise ValueError(f"planner.fleet_sizes = {cfg.planner.fleet_sizes!r} with rnd.enabled: the novelty network "
                          "reads a fixed number of drones; train one fleet size, or turn RND off")
 
 
 def fleet_configs(cfg: Config) -> list[Config]:
-    """The settings a run trains on in turn, an update each: one per fleet of ``planner.fleet_sizes``, else the run's
-    own."""
-    return [apply_overrides(cfg, [f"drones.num_drones={n}"], where="planner.fleet_sizes")
-            for n in cfg.planner.fleets] or [cfg]
+    """The settings a run trains on in turn, an update each: one per fleet of ``planner.fleet_sizes`` and base count
+    of ``planner.base_counts`` (each fleet with each count, fleet by fleet), else the run's own."""
+    if not (cfg.planner.fleets or cfg.planner.bases_in_turn):
+        return [cfg]
+    fleets = cfg.planner.fleets or (cfg.drones.num_drones,)
+    counts = cfg.planner.bases_in_turn or (cfg.drones.bases,)
+    return [apply_overrides(cfg, [f"drones.num_drones={n}", f"drones.bases={b}"],
+                            where="planner.fleet_sizes / planner.base_counts") for n in fleets for b in counts]
 
 
 def fleet_turns(cfg: Config, agent, seed: int) -> list[tuple]:

@@ -135,3 +135,23 @@ def test_a_fleet_planner_trains_on_each_fleet_in_turn_and_flies_another(tmp_path
     refused = cli("train", ROOT / "configs/planner.yaml", "--root", tmp_path, "--name", "r", *TINY,
                   "--set", "planner.fleet_sizes=2,3")
     assert refused.exit_code != 0 and "needs a network that flies any fleet" in refused.output
+
+
+def test_base_counts_take_their_turns_with_each_fleet():
+    """planner.base_counts: each fleet of planner.fleet_sizes with each count of bases, fleet by fleet; either key
+    alone varies only its own setting, and neither leaves the run's one setting."""
+    from roshan.config import ConfigError, load_config
+    from roshan.runs.learners import fleet_configs
+
+    base = [a for a in TINY if a != "--set"] + ["planner.network=fleet"]
+    cfg = load_config(ROOT / "configs/planner.yaml", [*base, "planner.fleet_sizes=2,3", "planner.base_counts=1,2"])
+    assert [(c.drones.num_drones, c.drones.bases) for c in fleet_configs(cfg)] == [(2, 1), (2, 2), (3, 1), (3, 2)]
+    only = load_config(ROOT / "configs/planner.yaml", [*base, "planner.base_counts=2,1"])
+    n = only.drones.num_drones
+    assert [(c.drones.num_drones, c.drones.bases) for c in fleet_configs(only)] == [(n, 2), (n, 1)]
+    one = load_config(ROOT / "configs/planner.yaml", [*base, "drones.num_drones=3", "planner.fleet_sizes='5'"])
+    assert [c.drones.num_drones for c in fleet_configs(one)] == [5]
+    plain = load_config(ROOT / "configs/planner.yaml", base)
+    assert fleet_configs(plain) == [plain]
+    with pytest.raises(ConfigError, match=r"planner.base_counts = '1,5': expected base counts from 1 to 4"):
+        load_config(ROOT / "configs/planner.yaml", [*base, "planner.base_counts=1,5"])
