@@ -341,6 +341,7 @@ class PointerPlannerNet(nn.Module):
                  temperature: float = 1.0, resources: bool = False, distance_prior: float = 0.0, bases: int = 1):
         super().__init__()
         self.bases = bases  # drones.bases: the first candidates are the bases (a setting of the env, not a weight)
+        self.resources = resources
         self.encoder = PlannerEncoder(num_drones, hidden, heads, resources, ids=self.knows_ids)
         self.query_proj = Linear(hidden, hidden)
         self.key_proj = Linear(hidden, hidden)
@@ -370,13 +371,27 @@ class PointerPlannerNet(nn.Module):
         blocked[..., :self.bases] &= ~blocked.all(-1, keepdim=True)
         return blocked
 
-    def decode_logits(self, base: torch.Tensor, valid: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
-        """Teacher-forced per-drone logits (B, N, K): drone i sees the choices of drones 0..i-1 in ``actions``."""
+    def selectable(self, obs: dict[str, torch.Tensor], valid: torch.Tensor) -> torch.Tensor:
+        """(B, 1, K) the valid candidates, the same for every drone; with resources (B, N, K): the bases only for a
+        drone whose battery or tank is below half, or when no fire is listed, as the thesis net offers them. Offered
+        always, a drone's nearest candidate at the start is its own base, and the distance prior would keep it there."""
+        if not self.resources:
+            return valid.unsqueeze(1)
+        b = self.bases
+        no_fire = ~valid[:, b:].any(-1)
+        restock = (obs["energy"][..., 0] < RESTOCK_BELOW) | (obs["water"][..., 0] < RESTOCK_BELOW)  # (B, N)
+        out = valid.unsqueeze(1).repeat(1, restock.shape[1], 1)
+        out[..., :b] = (restock | no_fire[:, None]).unsqueeze(-1)
+        return out
+
+    def decode_logits(self, base: torch.Tensor, selectable: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """Teacher-forced per-drone logits (B, N, K): drone i sees the choices of drones 0..i-1 in ``actions``;
+        ``selectable`` (B, 1 or N, K) from :meth:`selectable`."""
         onehot = F.one_hot(actions, base.shape[-1]).to(base.dtype)
         counts = onehot.cumsum(1) - onehot  # how many earlier drones chose j
         used = counts > 0
         used[..., :self.bases] = False  # the bases may repeat
-        blocked = self.blocked(~valid.unsqueeze(1), used)
+        blocked = self.blocked(~selectable, used)
         return (base - self.penalty() * counts).masked_fill(blocked, float("-inf"))
 
     def critic(self, d: torch.Tensor) -> torch.Tensor:
@@ -388,6 +403,7 @@ class PointerPlannerNet(nn.Module):
         """Actions (B, N), joint log-prob (B,), entropy (B,) and value (B,), decoding drones in id order."""
         d, fires, valid = self.encoder(obs, self.bases)
         base = self.base_logits(d, fires, obs)
+        selectable = self.selectable(obs, valid)
         B, N, K = base.shape
         c = self.penalty()
         counts = base.new_zeros(B, K)
@@ -395,19 +411,20 @@ class PointerPlannerNet(nn.Module):
         actions = torch.empty(B, N, dtype=torch.long, device=base.device)
         with torch.no_grad():
             for i in range(N):
-                row = (base[:, i] - c * counts).masked_fill(self.blocked(~valid, used), float("-inf"))
+                allowed = selectable[:, min(i, selectable.shape[1] - 1)]
+                row = (base[:, i] - c * counts).masked_fill(self.blocked(~allowed, used), float("-inf"))
                 a = sample_rows(row, deterministic, generator)
                 actions[:, i] = a
                 counts.scatter_add_(1, a.unsqueeze(1), torch.ones_like(counts[:, :1]))
                 used.scatter_(1, a.unsqueeze(1), (a >= self.bases).unsqueeze(1))
         # score the chosen actions with the same teacher-forced computation as evaluate(), so both agree exactly
-        log_prob, entropy = score(self.decode_logits(base, valid, actions), actions)
+        log_prob, entropy = score(self.decode_logits(base, selectable, actions), actions)
         return actions, log_prob, entropy, self.critic(d)
 
     def evaluate(self, obs: dict[str, torch.Tensor], actions: torch.Tensor):
         """Joint log-prob (B,), entropy (B,) and value (B,) of given actions (B, N), teacher-forced."""
         d, fires, valid = self.encoder(obs, self.bases)
-        logits = self.decode_logits(self.base_logits(d, fires, obs), valid, actions)
+        logits = self.decode_logits(self.base_logits(d, fires, obs), self.selectable(obs, valid), actions)
         return (*score(logits, actions), self.critic(d))
 
     def value(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:

@@ -9,6 +9,7 @@ from roshan.algos.planner_nets import (
     FleetPlannerNet,
     PointerPlannerNet,
     ThesisPlannerNet,
+    candidate_validity,
     trim_candidates,
 )
 from roshan.algos.ppo import PPO, Rollout
@@ -155,7 +156,7 @@ def test_pointer_net_never_samples_a_masked_candidate_or_a_taken_fire():
     obs = random_obs(32, N, K, g)
     d, fires, valid = net.encoder(obs)
     actions = net.forward_act(obs, generator=g)[0]
-    probs = torch.softmax(net.decode_logits(net.base_logits(d, fires, obs), valid, actions), -1)
+    probs = torch.softmax(net.decode_logits(net.base_logits(d, fires, obs), net.selectable(obs, valid), actions), -1)
     assert bool((probs[~valid.unsqueeze(1).expand_as(probs)] == 0).all())
     taken = probs[:, 1].gather(-1, actions[:, :1])  # drone 1 cannot take drone 0's fire
     assert bool((taken[actions[:, 0] > 0] == 0).all())
@@ -170,7 +171,7 @@ def test_pointer_groundstation_may_repeat():
     d, fires, valid = net.encoder(obs)
     base = net.base_logits(d, fires, obs)
     home = torch.zeros(256, 3, dtype=torch.long)  # every drone at the groundstation
-    logits = net.decode_logits(base, valid, home)
+    logits = net.decode_logits(base, net.selectable(obs, valid), home)
     # drone i's groundstation logit carries the soft penalty c * (number of earlier drones there), no mask
     torch.testing.assert_close(logits[..., 0], base[..., 0] - net.penalty() * torch.arange(3.0))
     torch.testing.assert_close(logits[..., 1:], base[..., 1:])
@@ -312,6 +313,16 @@ def test_with_a_battery_the_nets_read_energy_and_may_send_a_drone_home_while_fir
         probs = aware.probs(fills)
         assert bool((probs[:, 0, 0] == 0).all()) and bool((probs[:, 1:, 0] > 0).all())
         assert bool((probs[:, 0, 1:].sum(-1) > 0.99).all())
+    else:  # the pointer nets offer home by the same rule: a stocked drone's nearest candidate is often its base
+        fills = {**obs, "energy": obs["energy"].clone(), "water": obs["water"].clone()}
+        fills["energy"][..., 0] = torch.tensor([0.5, 0.49, 0.9])
+        fills["water"][..., 0] = torch.tensor([0.5, 0.9, 0.2])
+        allowed = aware.selectable(fills, candidate_validity(fills["fires_mask"]))
+        assert allowed.shape == (6, 3, 9) and bool((~allowed[:, 0, 0]).all()) and bool(allowed[:, 1:, 0].all())
+        for _ in range(20):
+            drawn = aware.forward_act(fills, generator=g)[0]
+            assert bool((drawn[:, 0] != 0).all())  # drone 0 is stocked: never sent home while fires burn
+        assert bool(plain.selectable(fills, candidate_validity(fills["fires_mask"]))[..., 0].all())  # no battery
     drained = {**obs, "energy": torch.zeros_like(obs["energy"])}
     assert not torch.allclose(aware.evaluate(obs, actions)[0], aware.evaluate(drained, actions)[0])
     assert not torch.allclose(aware.value(obs), aware.value(drained))
@@ -488,7 +499,7 @@ def test_with_two_bases_the_pointer_nets_let_either_base_repeat_and_take_each_fi
     d, fires, valid = net.encoder(obs, net.bases)
     base = net.base_logits(d, fires, obs)
     both = torch.ones(256, 3, dtype=torch.long)  # every drone to base 1
-    logits = net.decode_logits(base, valid, both)
+    logits = net.decode_logits(base, net.selectable(obs, valid), both)
     torch.testing.assert_close(logits[..., 1], base[..., 1] - net.penalty() * torch.arange(3.0))  # no mask
     torch.testing.assert_close(logits[..., 0], base[..., 0])
     net.log_penalty.fill_(-3.0)
