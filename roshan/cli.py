@@ -217,14 +217,14 @@ def _bases_lines(land, bases: int | None, base_cells: str | None) -> list[str]:
     prints them; a setting the drones would refuse is refused here the same way."""
     from roshan.config.schema import from_dict
     from roshan.config.sim import DroneConfig, parse_base_cells
-    from roshan.kernels.drones import corner_bases, farthest_cell
+    from roshan.kernels.drones import cells_outside, corner_bases, farthest_cell
     from roshan.maps import MIN_BASES_MAP_SIDE
 
     count = bases or len(parse_base_cells(base_cells or "")) or 1
     cfg = from_dict(DroneConfig, {"bases": count, "base_cells": base_cells or ""})
     rows, cols, cell = land.rows, land.cols, land.cell_size
     if cfg.explicit_bases:
-        outside = [c for c in cfg.explicit_bases if c[0] >= rows or c[1] >= cols]
+        outside = cells_outside(cfg.explicit_bases, rows, cols)
         if outside:
             raise ValueError(f"--base-cells {base_cells!r}: cell(s) {outside} lie outside {land.name} "
                              f"({rows} x {cols} cells: rows 0-{rows - 1}, columns 0-{cols - 1})")

@@ -135,7 +135,17 @@ def distinct_rows(logits: torch.Tensor, actions: torch.Tensor, bases: int = 1) -
     return without_taken(logits, taken)
 
 
-RESTOCK_BELOW = 0.5  # with a battery: the fill of battery or tank below which the thesis net may send a drone home
+RESTOCK_BELOW = 0.5  # with a battery: the fill of battery or tank below which a net may send a drone home
+
+
+def offer_bases_to_restock(allowed: torch.Tensor, obs: dict[str, torch.Tensor], bases: int) -> torch.Tensor:
+    """(B, N, K) per drone from ``allowed`` (B, K): the bases (the first ``bases`` candidates) only for a drone whose
+    battery or tank is below half (:data:`RESTOCK_BELOW`), or for every drone when no fire is listed."""
+    no_fire = ~allowed[:, bases:].any(-1)
+    restock = (obs["energy"][..., 0] < RESTOCK_BELOW) | (obs["water"][..., 0] < RESTOCK_BELOW)  # (B, N)
+    out = allowed.unsqueeze(1).repeat(1, restock.shape[1], 1)
+    out[..., :bases] = (restock | no_fire[:, None]).unsqueeze(-1)
+    return out
 
 
 class ThesisPlannerNet(nn.Module):
@@ -184,14 +194,8 @@ class ThesisPlannerNet(nn.Module):
         resources (B, N, K): the bases also for each drone whose battery or tank is below half."""
         b = self.bases
         allowed = obs["fires_mask"] > 0
-        no_fire = ~allowed[:, b:].any(-1)
-        allowed[:, :b] = no_fire[:, None]
-        allowed = allowed.unsqueeze(1)
-        if self.resources:
-            restock = (obs["energy"][..., 0] < RESTOCK_BELOW) | (obs["water"][..., 0] < RESTOCK_BELOW)  # (B, N)
-            allowed = allowed.repeat(1, restock.shape[1], 1)
-            allowed[..., :b] = (restock | no_fire[:, None]).unsqueeze(-1)
-        return allowed
+        allowed[:, :b] = ~allowed[:, b:].any(-1, keepdim=True)
+        return offer_bases_to_restock(allowed, obs, b) if self.resources else allowed.unsqueeze(1)
 
     def queries(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
         """(B, N, H) drone queries: position, goal and id (with resources: water and energy too)."""
@@ -375,14 +379,7 @@ class PointerPlannerNet(nn.Module):
         """(B, 1, K) the valid candidates, the same for every drone; with resources (B, N, K): the bases only for a
         drone whose battery or tank is below half, or when no fire is listed, as the thesis net offers them. Offered
         always, a drone's nearest candidate at the start is its own base, and the distance prior would keep it there."""
-        if not self.resources:
-            return valid.unsqueeze(1)
-        b = self.bases
-        no_fire = ~valid[:, b:].any(-1)
-        restock = (obs["energy"][..., 0] < RESTOCK_BELOW) | (obs["water"][..., 0] < RESTOCK_BELOW)  # (B, N)
-        out = valid.unsqueeze(1).repeat(1, restock.shape[1], 1)
-        out[..., :b] = (restock | no_fire[:, None]).unsqueeze(-1)
-        return out
+        return offer_bases_to_restock(valid, obs, self.bases) if self.resources else valid.unsqueeze(1)
 
     def decode_logits(self, base: torch.Tensor, selectable: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         """Teacher-forced per-drone logits (B, N, K): drone i sees the choices of drones 0..i-1 in ``actions``;

@@ -34,6 +34,11 @@ def corner_bases(rows: int, cols: int, count: int) -> tuple[tuple[tuple[int, int
     return tuple(tuple(corner(first ^ BASE_CORNER_MASKS[b]) for b in range(count)) for first in range(4))
 
 
+def cells_outside(cells, rows: int, cols: int) -> list[tuple[int, int]]:
+    """The (row, col) cells of ``cells`` that lie outside a map of ``rows`` x ``cols`` cells."""
+    return [c for c in cells if c[0] >= rows or c[1] >= cols]
+
+
 def farthest_cell(placements, rows: int, cols: int, cell: float) -> float:
     """Metres from the farthest cell centre of a ``rows`` x ``cols`` map to its nearest base, the largest over
     ``placements`` (P, B, 2) base cells: the farthest a fire can be from where a drone restocks."""
@@ -85,7 +90,7 @@ class DroneSim:
         self.start_gs = cfg.groundstation_start_percentage
         self.num_bases = B = cfg.bases
         self.base_cells = cfg.explicit_bases  # () for the corner rule
-        outside = [c for c in self.base_cells if c[0] >= self.rows or c[1] >= self.cols]
+        outside = cells_outside(self.base_cells, self.rows, self.cols)
         if outside:
             raise ValueError(f"drones.base_cells = {cfg.base_cells!r}: cell(s) {outside} lie outside the map of "
                              f"{self.rows} x {self.cols} cells (rows 0-{self.rows - 1}, columns 0-{self.cols - 1})")
